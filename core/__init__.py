@@ -1,0 +1,1 @@
+"""The engine: NumPy, SciPy and OpenCV only. Never imports bpy."""

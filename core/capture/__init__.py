@@ -1,0 +1,1 @@
+"""Capture input: calibration formats, synchronised frames, background plates."""

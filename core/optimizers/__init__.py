@@ -1,0 +1,1 @@
+"""Pose optimisers behind one interface: ISA (default), APF, PF, FSA, ICP."""

@@ -1,0 +1,1 @@
+"""Rasterising the posed body into each view: reference, fast CPU and GLSL paths."""
