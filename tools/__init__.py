@@ -1,0 +1,1 @@
+"""Build tooling (extension zip, bundled wheels). Excluded from the extension zip itself."""
