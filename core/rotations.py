@@ -1,0 +1,75 @@
+"""Batched rotation helpers (rotation vectors, axis-angle, matrices) in NumPy."""
+import numpy as np
+
+
+def skew(v):
+    """(...,3) -> (...,3,3) cross-product matrices."""
+    v = np.asarray(v, dtype=np.float64)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1] = -v[..., 2]
+    out[..., 0, 2] = v[..., 1]
+    out[..., 1, 0] = v[..., 2]
+    out[..., 1, 2] = -v[..., 0]
+    out[..., 2, 0] = -v[..., 1]
+    out[..., 2, 1] = v[..., 0]
+    return out
+
+
+def axis_angle_matrix(axis, angle):
+    """Rotation by `angle` (...,) about the unit `axis` (3,) or (...,3): Rodrigues' formula."""
+    axis = np.asarray(axis, dtype=np.float64)
+    angle = np.asarray(angle, dtype=np.float64)
+    k = skew(np.broadcast_to(axis, angle.shape + (3,)))
+    s = np.sin(angle)[..., None, None]
+    c = np.cos(angle)[..., None, None]
+    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+
+
+def rotvec_to_matrix(rotvec):
+    """(...,3) rotation vectors (exponential map) -> (...,3,3)."""
+    rotvec = np.asarray(rotvec, dtype=np.float64)
+    angle = np.linalg.norm(rotvec, axis=-1)
+    safe = np.where(angle > 1e-12, angle, 1.0)
+    axis = rotvec / safe[..., None]
+    axis = np.where((angle > 1e-12)[..., None], axis, np.array([1.0, 0.0, 0.0]))
+    return axis_angle_matrix(axis, angle)
+
+
+def matrix_to_rotvec(matrix):
+    """(...,3,3) -> (...,3) rotation vectors with angle in [0, pi]."""
+    m = np.asarray(matrix, dtype=np.float64)
+    cos = np.clip((np.trace(m, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    w = np.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], axis=-1)
+    sin = np.sin(angle)
+    small = sin > 1e-6
+    out = np.where(small[..., None], w * (angle / np.where(small, 2.0 * sin, 1.0))[..., None], 0.5 * w)
+    # Near pi the antisymmetric part vanishes: take the axis from the symmetric part.
+    near_pi = (~small) & (angle > 1.0)
+    if np.any(near_pi):
+        sym = (m[near_pi] + np.eye(3)) / 2.0
+        idx = np.argmax(np.diagonal(sym, axis1=-2, axis2=-1), axis=-1)
+        axis = sym[np.arange(len(idx)), :, idx]
+        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+        out[near_pi] = axis * angle[near_pi][..., None]
+    return out
+
+
+def orthonormalize(matrix):
+    """Nearest rotation (SVD) of (...,3,3)."""
+    u, _, vt = np.linalg.svd(matrix)
+    d = np.sign(np.linalg.det(u @ vt))
+    u[..., :, -1] *= d[..., None]
+    return u @ vt
+
+
+def rigid_inverse(m):
+    """Inverse of (...,4,4) transforms whose 3x3 part is rotation times uniform scale."""
+    m = np.asarray(m, dtype=np.float64)
+    lin = m[..., :3, :3]
+    inv_lin = np.linalg.inv(lin)
+    out = np.zeros_like(m)
+    out[..., :3, :3] = inv_lin
+    out[..., :3, 3] = -(inv_lin @ m[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
