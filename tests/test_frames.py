@@ -153,3 +153,82 @@ def test_find_video(tmp_path, clip):
     (tmp_path / "cam_b").mkdir()
     assert find_video(tmp_path, "cam_a") == tmp_path / "cam_a.mp4"
     assert find_video(tmp_path, "cam_b") == tmp_path / "cam_b"
+
+
+# ---- load_capture ------------------------------------------------------------------------------
+def _tiny_capture(root, clip, size_2=(W, H)):
+    """Two cameras: cam_1 as mp4, cam_2 as a numbered png folder; a background plate for cam_1."""
+    from markerless_mocap.core.camera import Camera, rodrigues_to_matrix
+    from markerless_mocap.core.capture.calibration import write_toml_calibration
+
+    path, frames = clip
+    K = np.array([[150.0, 0, 79.5], [0, 150.0, 59.5], [0, 0, 1]])
+    cams = [Camera("cam_1", K, [0.01, 0, 0, 0], np.eye(3), [0, 0, 3.0], W, H),
+            Camera("cam_2", K, [], rodrigues_to_matrix([0, 0.5, 0]), [0.2, 0, 3.0], *size_2)]
+    root.mkdir(parents=True, exist_ok=True)
+    write_toml_calibration(cams, root / "calibration.toml", units="mm")
+    (root / "videos").mkdir()
+    (root / "videos" / "cam_1.mp4").write_bytes(path.read_bytes())
+    folder_frames = make_frames(25, seed=9)
+    write_folder(root / "videos" / "cam_2", folder_frames)
+    (root / "background").mkdir()
+    plate = np.full((H, W, 3), 77, np.uint8)
+    cv2.imwrite(str(root / "background" / "cam_1.png"), plate)
+    return cams, frames, folder_frames, plate
+
+
+def test_load_capture(tmp_path, clip):
+    from markerless_mocap.core.capture.capture import load_capture
+
+    cams, frames, folder_frames, plate = _tiny_capture(tmp_path / "cap", clip)
+    cap = load_capture(tmp_path / "cap", offsets={"cam_1": 2})
+    try:
+        assert cap.camera_names == ["cam_1", "cam_2"]
+        assert cap.calibration_path.name == "calibration.toml"
+        np.testing.assert_allclose(cap.camera("cam_2").t, cams[1].t, atol=1e-12)  # mm file read back in metres
+        assert cap.frames.n_frames == 25 and cap.frames.fps == pytest.approx(25.0)
+        out = cap.frames.read(10)
+        assert identify(out["cam_1"], frames)[0] == 12
+        np.testing.assert_array_equal(out["cam_2"], folder_frames[10])
+        assert list(cap.backgrounds) == ["cam_1"]
+        np.testing.assert_array_equal(cap.backgrounds["cam_1"], plate)
+    finally:
+        cap.close()
+
+
+def test_load_capture_errors(tmp_path, clip):
+    from markerless_mocap.core.capture.capture import CaptureError, load_capture
+
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_capture(tmp_path / "nothing")
+    _tiny_capture(tmp_path / "a", clip)
+    (tmp_path / "a" / "videos" / "cam_1.mp4").unlink()
+    with pytest.raises(VideoNotFoundError, match=r"camera 'cam_1': no footage found; expected .*videos/cam_1\.mp4"):
+        load_capture(tmp_path / "a")
+    _tiny_capture(tmp_path / "b", clip, size_2=(2 * W, 2 * H))
+    with pytest.raises(CaptureError, match=r"camera 'cam_2': the calibration \(calibration\.toml\) says 320x240 but "
+                                           r".*cam_2 is 160x120; the video looks resized by 0\.5"):
+        load_capture(tmp_path / "b")
+    _tiny_capture(tmp_path / "c", clip)
+    cv2.imwrite(str(tmp_path / "c" / "background" / "cam_1.png"), np.zeros((10, 10, 3), np.uint8))
+    with pytest.raises(CaptureError, match="background plate .* is 10x10"):
+        load_capture(tmp_path / "c")
+
+
+def test_load_capture_easymocap_sizes_from_videos(tmp_path, clip):
+    """EasyMocap files without H_/W_: the image size comes from the footage."""
+    from markerless_mocap.core.capture.calibration import write_easymocap_calibration
+    from markerless_mocap.core.capture.capture import load_capture
+
+    cams, *_ = _tiny_capture(tmp_path / "cap", clip)
+    (tmp_path / "cap" / "calibration.toml").unlink()
+    intri, _ = write_easymocap_calibration(cams, tmp_path / "cap")
+    lines = [ln for ln in intri.read_text().splitlines() if not ln.startswith(("H_", "W_"))]
+    intri.write_text("\n".join(lines) + "\n")
+    from markerless_mocap.core.capture.calibration import MissingImageSizeError, read_calibration
+
+    with pytest.raises(MissingImageSizeError):
+        read_calibration(tmp_path / "cap")
+    cap = load_capture(tmp_path / "cap")
+    assert [c.size for c in cap.cameras] == [(W, H), (W, H)]
+    cap.close()

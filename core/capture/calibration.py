@@ -40,6 +40,10 @@ class CalibrationNotFoundError(CalibrationError, FileNotFoundError):
     pass
 
 
+class MissingImageSizeError(CalibrationError):
+    """The file gives no image size for a camera; pass image_sizes (e.g. read from the videos)."""
+
+
 def natural_key(name: str):
     """Sort key placing cam_2 before cam_10."""
     return [(0, int(part), "") if part.isdigit() else (1, 0, part.lower()) for part in re.split(r"(\d+)", str(name))]
@@ -212,7 +216,8 @@ def _read_toml(path: Path, units, image_sizes) -> list[Camera]:
             if image_sizes and name in image_sizes:
                 size = image_sizes[name]
             else:
-                raise CalibrationError(f"{where}: camera '{name}' has no 'size' = [width, height]; add it to the file")
+                raise MissingImageSizeError(f"{where}: camera '{name}' has no 'size' = [width, height]; add it to "
+                                            "the file")
         W, H = _as_size(where, name, size)
         cams.append(_make_camera(where, name, K, dist, R, t, W, H))
     if not cams:
@@ -300,7 +305,7 @@ def _read_easymocap(path: Path, units, image_sizes) -> list[Camera]:
             elif image_sizes and name in image_sizes:
                 size = image_sizes[name]
             else:
-                raise CalibrationError(f"{wi}: camera '{name}' has no H_{name}/W_{name} image size; add them to "
+                raise MissingImageSizeError(f"{wi}: camera '{name}' has no H_{name}/W_{name} image size; add them to "
                                        "intri.yml or load it with its videos so the size can be read from them")
             W, H = _as_size(wi, name, size)
             R = _easymocap_rotation(fe, we, name)
