@@ -82,8 +82,7 @@ def camera_from_object(cam_obj, scene, name: str | None = None) -> Camera:
     else:
         w, h = render.resolution_x, render.resolution_y
         aspx, aspy = render.pixel_aspect_x, render.pixel_aspect_y
-    if data.lens_unit == "FOV":
-        pass  # data.lens stays in sync with angle in Blender, so the mm value is still right
+    # data.lens is kept in sync with the field of view by Blender, whatever lens_unit shows.
     params = BlenderCameraParams(
         matrix_world=np.array(cam_obj.matrix_world, dtype=np.float64),
         lens=float(data.lens), sensor_width=float(data.sensor_width), sensor_height=float(data.sensor_height),

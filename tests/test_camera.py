@@ -86,7 +86,6 @@ def test_scaled_matches_resized_image_geometry():
     sx, sy = 214 / 641, 160 / 479
     exp = np.stack([(full[:, 0] + 0.5) * sx - 0.5, (full[:, 1] + 0.5) * sy - 0.5], axis=-1)
     np.testing.assert_allclose(odd.project(pts), exp, atol=1e-9)
-    # the corner of the image stays the corner: pixel centre (-0.5,-0.5) edge maps to edge
     with pytest.raises(CameraError, match="positive"):
         cam.scaled(0)
 
