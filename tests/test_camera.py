@@ -238,3 +238,67 @@ def test_blender_negative_control_shift_sign(bpy_module):
     pts = points_in_front(rng, cam, n=20)
     d = _blender_pixels(bpy, scene, obj, pts, 640, 480) - cam.project(pts)
     np.testing.assert_allclose(d[:, 0], 640 - 2 * cam.K[0, 2] - 1, atol=0.01)
+
+
+@pytest.mark.bpy
+def test_blender_cameras_of_different_sizes_share_the_scene(bpy_module):
+    """Render size is per scene: each camera keeps its own and activate_camera applies it."""
+    from markerless_mocap.addon.camera_bridge import activate_camera, camera_from_object, create_blender_camera
+
+    bpy = bpy_module
+    scene = bpy.context.scene
+    rng = np.random.default_rng(11)
+    land = random_camera(rng, 640, 480, 900, 780, name="land")
+    port = random_camera(rng, 480, 640, 700, 700, name="port")
+    obj_land = create_blender_camera(scene, land)
+    obj_port = create_blender_camera(scene, port)
+    assert (scene.render.resolution_x, scene.render.resolution_y) == (480, 640)  # the last one created
+    activate_camera(scene, obj_land)
+    assert scene.camera == obj_land
+    assert (scene.render.resolution_x, scene.render.resolution_y) == (640, 480)
+    assert scene.render.pixel_aspect_y / scene.render.pixel_aspect_x == pytest.approx(900 / 780, rel=1e-6)
+    bpy.context.view_layer.update()
+    pts = points_in_front(rng, land, n=50)
+    assert np.abs(_blender_pixels(bpy, scene, obj_land, pts, 640, 480) - land.project(pts)).max() < 0.01
+    # each camera reads back with its own size whatever the scene is set to
+    np.testing.assert_allclose(camera_from_object(obj_port, scene).K, port.K, atol=1e-4)
+    assert camera_from_object(obj_port, scene).size == (480, 640)
+    mesh_obj = bpy.data.objects.new("empty", None)
+    with pytest.raises(ValueError, match="not a camera"):
+        camera_from_object(mesh_obj, scene)
+
+
+@pytest.mark.bpy
+@pytest.mark.parametrize("fit,res,aspect", [("AUTO", (1280, 720), (1.0, 1.0)), ("AUTO", (720, 1280), (1.0, 1.3)),
+                                            ("VERTICAL", (800, 600), (1.2, 1.0)),
+                                            ("HORIZONTAL", (600, 800), (1.0, 1.0))])
+def test_blender_native_camera_reads_back(bpy_module, fit, res, aspect):
+    """A camera set up by hand in Blender (no custom properties): the inverse formula alone must agree
+    with world_to_camera_view."""
+    from mathutils import Euler, Vector
+
+    from markerless_mocap.addon.camera_bridge import camera_from_object
+
+    bpy = bpy_module
+    scene = bpy.context.scene
+    data = bpy.data.cameras.new("native")
+    data.lens, data.sensor_width, data.sensor_height, data.sensor_fit = 42.0, 36.0, 20.0, fit
+    data.shift_x, data.shift_y = 0.07, -0.04
+    obj = bpy.data.objects.new("native", data)
+    scene.collection.objects.link(obj)
+    obj.location = Vector((4.0, -5.0, 1.7))
+    obj.rotation_euler = Euler((1.3, 0.1, 0.7))
+    scene.render.resolution_x, scene.render.resolution_y = res
+    scene.render.pixel_aspect_x, scene.render.pixel_aspect_y = aspect
+    bpy.context.view_layer.update()
+    cam = camera_from_object(obj, scene)
+    assert cam.size == res
+    rng = np.random.default_rng(0)
+    # points inside the view frustum, 3-8 m in front of the camera
+    pix = rng.uniform([0, 0], res, size=(100, 2))
+    depth = rng.uniform(3, 8, size=100)
+    rays = np.linalg.solve(cam.K, np.hstack([pix, np.ones((100, 1))]).T).T * depth[:, None]
+    pts = (rays - cam.t) @ cam.R  # camera -> world
+    got = _blender_pixels(bpy, scene, obj, pts, *res)
+    np.testing.assert_allclose(got, cam.project(pts), atol=0.01)
+    np.testing.assert_allclose(got, pix, atol=0.01)
