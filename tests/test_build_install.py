@@ -1,0 +1,285 @@
+"""The installable zip: build it for linux-x64 (wheels from dist/wheels-cache, else PyPI once per
+machine), check what is inside, install it into a fresh bpy process, restart, and use the bundled
+cv2/scipy/numba from the extension's own site-packages."""
+import hashlib
+import importlib.util
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+import tomllib
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from markerless_mocap.operators import cli
+from markerless_mocap.operators.cmd_build import build_extension
+from markerless_mocap.tools import extension_builder, staging, wheels
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGE = "markerless_mocap"
+PLATFORM = "linux-x64"
+CACHE = REPO / "dist" / "wheels-cache"
+PROBE = REPO / "tools" / "install_probe.py"
+HAVE_BPY = importlib.util.find_spec("bpy") is not None
+needs_bpy = pytest.mark.skipif(not HAVE_BPY, reason="bpy (and its extension builder) is not installed")
+
+# Pins the zip must carry (numpy is Blender's own and must not be bundled).
+PINS = wheels.read_pins(REPO / "requirements.txt")
+EXPECTED_DISTS = {"opencv-contrib-python-headless", "scipy", "numba", "llvmlite"}
+
+
+def operator_classes_in_source():
+    """Every `class MOCAP_OT_...` defined in operators/*.py (what the add-on must register)."""
+    found = set()
+    for path in sorted((REPO / "operators").glob("*.py")):
+        found.update(re.findall(r"^\s*class\s+(MOCAP_OT_\w+)\s*[(:]", path.read_text(), re.MULTILINE))
+    return sorted(found)
+
+
+def offline_pip(monkeypatch):
+    """Make any pip download fail at once, without network (pip reads these from the environment)."""
+    monkeypatch.setenv("PIP_INDEX_URL", "file:///nonexistent-index")
+    monkeypatch.setenv("PIP_EXTRA_INDEX_URL", "file:///nonexistent-index")
+    monkeypatch.setenv("PIP_FIND_LINKS", "")
+
+
+@pytest.fixture(scope="module")
+def build(tmp_path_factory):
+    if not HAVE_BPY:
+        pytest.skip("bpy is not installed")
+    out = tmp_path_factory.mktemp("dist")
+    started = time.time()
+    messages = []
+    zips = build_extension(out, platforms=[PLATFORM], cache_dir=CACHE, log=messages.append)
+    assert len(zips) == 1
+    return {"zip": zips[0], "started": started, "messages": messages}
+
+
+def _zip_manifest(zf):
+    return tomllib.loads(zf.read("blender_manifest.toml").decode("utf-8"))
+
+
+# --- what is inside the zip -------------------------------------------------------------------
+
+@pytest.mark.slow
+@needs_bpy
+def test_zip_lists_exactly_the_wheels_it_carries(build):
+    with zipfile.ZipFile(build["zip"]) as zf:
+        manifest = _zip_manifest(zf)
+        names = set(zf.namelist())
+    listed = manifest["wheels"]
+    assert all(w.startswith("./wheels/") for w in listed), listed
+    in_zip = {n for n in names if n.endswith(".whl")}
+    assert {w[2:] for w in listed} == in_zip
+    assert manifest["platforms"] == [PLATFORM]
+    dists = {}
+    for w in in_zip:
+        name, version, _, _ = wheels.parse_wheel_filename(Path(w).name)
+        assert name not in dists, f"two wheels of {name} for one platform: {in_zip}"
+        dists[name] = str(version)
+        assert wheels.wheel_fits(Path(w).name, PLATFORM, (3, 11)), w
+    assert set(dists) == EXPECTED_DISTS, "numpy must not be bundled; cv2/scipy/numba/llvmlite must"
+    for name in ("opencv-contrib-python-headless", "scipy", "numba"):
+        assert dists[name] == PINS[name]
+    # llvmlite is numba's dependency: the version the tests here run with
+    from importlib.metadata import version
+    assert dists["llvmlite"] == version("llvmlite")
+
+
+@pytest.mark.slow
+@needs_bpy
+def test_zip_wheels_are_byte_identical_to_the_downloaded_ones(build):
+    with zipfile.ZipFile(build["zip"]) as zf:
+        for name in (n for n in zf.namelist() if n.endswith(".whl")):
+            cached = CACHE / Path(name).name
+            assert hashlib.sha256(zf.read(name)).digest() == hashlib.sha256(cached.read_bytes()).digest(), name
+
+
+@pytest.mark.slow
+@needs_bpy
+def test_zip_holds_the_package_sources_and_nothing_of_the_dev_tree(build):
+    with zipfile.ZipFile(build["zip"]) as zf:
+        names = set(zf.namelist())
+        assert {"__init__.py", "blender_manifest.toml"} <= names  # at the root, as Blender wants
+        dev_only = {"tests", "tools", "dist", ".git", ".venv", ".ci", "sample_scenes", "results", "__pycache__"}
+        leaked = [n for n in names if dev_only & set(Path(n).parts) or Path(n).name.startswith(".")
+                  or n in ("setup.sh", "requirements.txt")]
+        assert not leaked
+        # Simple reference: every .py file of the package (outside dev-only folders) is shipped,
+        # unchanged. Files edited after the build started (other work in the checkout) are skipped.
+        checked = 0
+        for path in REPO.rglob("*.py"):
+            rel = path.relative_to(REPO)
+            if dev_only & set(rel.parts) or any(p.startswith(".") for p in rel.parts):
+                continue
+            if path.stat().st_mtime >= build["started"] - 1:
+                continue
+            assert rel.as_posix() in names, f"{rel} missing from the zip"
+            assert zf.read(rel.as_posix()) == path.read_bytes(), f"{rel} differs in the zip"
+            checked += 1
+        assert checked >= 4
+
+
+# --- install into a fresh Blender --------------------------------------------------------------
+
+def _probe(args, user_dir):
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user_dir))
+    proc = subprocess.run([sys.executable, "-P", str(PROBE), *map(str, args)],
+                          capture_output=True, text=True, env=env, timeout=600)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("PROBE-JSON ")]
+    assert proc.returncode == 0 and lines, f"probe failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    return json.loads(lines[-1][len("PROBE-JSON "):])
+
+
+@pytest.fixture(scope="module")
+def installed(build, tmp_path_factory):
+    user_dir = tmp_path_factory.mktemp("blender_user")
+    classes = operator_classes_in_source()
+    first = _probe(["install", build["zip"], PACKAGE, *classes], user_dir)
+    again = _probe(["restart", PACKAGE, *classes], user_dir)
+    return {"install": first, "restart": again, "classes": classes}
+
+
+@pytest.mark.slow
+@pytest.mark.bpy
+@needs_bpy
+def test_install_enables_the_addon_and_registers_every_operator(installed):
+    for phase in ("install", "restart"):
+        report = installed[phase]
+        assert not report["errors"], report["errors"]
+        assert report["enabled_in_preferences"], phase
+        assert report["addon_utils_check"] == [True, True], phase
+        assert report["registered_classes"] == installed["classes"], phase
+        assert len(report["mocap_ops"]) >= len(installed["classes"]), phase
+    assert installed["install"]["install_result"] == ["FINISHED"]
+
+
+@pytest.mark.slow
+@pytest.mark.bpy
+@needs_bpy
+def test_bundled_wheels_import_from_the_extension_site_packages(installed):
+    report = installed["restart"]
+    site = Path(report["extensions_dir"]) / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}"
+    expected_versions = {"cv2": PINS["opencv-contrib-python-headless"], "scipy": PINS["scipy"],
+                         "numba": PINS["numba"]}
+    for name, version in expected_versions.items():
+        info = report["modules"][name]
+        assert Path(info["file"]).is_relative_to(site), f"{name} came from {info['file']}, not {site}"
+        assert version.startswith(info["version"]), (name, info["version"])
+        assert info["works"], name
+
+
+def test_operators_exist_in_the_package():
+    assert operator_classes_in_source(), "no `class MOCAP_OT_...` in operators/*.py: nothing for users to run"
+
+
+# --- cache, errors, manifest editing -------------------------------------------------------------
+
+@pytest.mark.slow
+@needs_bpy
+def test_second_build_is_offline_and_fast(build, tmp_path, monkeypatch, capsys):
+    offline_pip(monkeypatch)
+    t0 = time.perf_counter()
+    code = cli.main(["build", "--out", str(tmp_path), "--platforms", PLATFORM, "--split-platforms"])
+    elapsed = time.perf_counter() - t0
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "downloading" not in out
+    zip_path = tmp_path / f"{PACKAGE}-0.1.0-linux_x64.zip"
+    assert f"{zip_path}  " in out and " MB" in out  # path and size printed
+    with zipfile.ZipFile(zip_path) as zf, zipfile.ZipFile(build["zip"]) as ref:
+        assert {n for n in zf.namelist() if n.endswith(".whl")} == {n for n in ref.namelist() if n.endswith(".whl")}
+        generated = _zip_manifest(zf)["build"]["generated"]
+        assert generated["platforms"] == [PLATFORM]
+    assert elapsed < 30, f"cached build took {elapsed:.1f} s"
+
+
+def test_missing_wheel_names_package_platform_and_the_cache_option(tmp_path, monkeypatch):
+    offline_pip(monkeypatch)
+    with pytest.raises(wheels.WheelUnavailableError) as err:
+        wheels.download(tmp_path, "scipy", wheels.SpecifierSet("==1.15.3"), "windows-x64", (3, 11), log=lambda m: None)
+    text = str(err.value)
+    assert "scipy==1.15.3" in text and "windows-x64" in text and "--wheels-cache" in text
+    assert not list(tmp_path.glob("*.whl"))
+
+
+def test_bad_platform_is_a_clear_cli_error(capsys):
+    assert cli.main(["build", "--platforms", "linux-x64,amiga-68k"]) == 1
+    err = capsys.readouterr().err
+    assert "amiga-68k" in err and "linux-x64, windows-x64, macos-arm64" in err
+
+
+def test_cache_lookup_prefers_pinned_version_then_oldest_os(tmp_path):
+    names = [
+        "scipy-1.15.3-cp311-cp311-manylinux_2_27_x86_64.manylinux_2_28_x86_64.whl",
+        "scipy-1.15.3-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
+        "scipy-1.15.2-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
+        "scipy-1.15.3-cp312-cp312-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
+        "scipy-1.15.3-cp311-cp311-musllinux_1_2_x86_64.whl",
+        "scipy-1.15.3-cp311-cp311-macosx_14_0_arm64.whl",
+        "scipy-1.15.3-cp311-cp311-macosx_12_0_arm64.whl",
+        "not-a-wheel.whl",
+    ]
+    for n in names:
+        (tmp_path / n).write_bytes(b"")
+    pick = lambda spec, plat: wheels.find_cached(tmp_path, "scipy", wheels.SpecifierSet(spec), plat, (3, 11))
+    assert pick("==1.15.3", "linux-x64").name == names[1]
+    assert pick(">=1.15", "linux-x64").name == names[1]
+    assert pick("<1.15.3", "linux-x64").name == names[2]
+    assert pick("==1.15.3", "macos-arm64").name == names[6]
+    assert pick("==1.15.3", "windows-x64") is None
+
+
+def test_wheel_fits_agrees_with_blenders_platform_rule():
+    """Reference: blender_ext.py's own wheel-platform -> Blender-platform mapping (platform part),
+    plus the Python-tag rule spelled out by hand."""
+    if not HAVE_BPY:
+        pytest.skip("bpy is not installed")
+    import importlib.util as iu
+    spec = iu.spec_from_file_location("_blender_ext_ref", extension_builder.blender_ext_path())
+    ref = iu.module_from_spec(spec)
+    spec.loader.exec_module(ref)
+    platform_tags = ["manylinux_2_17_x86_64.manylinux2014_x86_64", "manylinux_2_28_x86_64", "manylinux2014_aarch64",
+                     "win_amd64", "win32", "win_arm64", "macosx_11_0_arm64", "macosx_10_9_x86_64",
+                     "macosx_10_9_universal2", "any"]
+    for ptag in platform_tags:
+        fname = f"pkg-1.0-cp311-cp311-{ptag}.whl"
+        for plat in wheels.PLATFORMS:
+            expected = ptag == "any" or any(plat in ref.blender_platforms_from_wheel_platform(t)
+                                            for t in ptag.split("."))
+            assert wheels.wheel_fits(fname, plat, (3, 11)) == expected, (fname, plat)
+    python_cases = {("cp311-cp311", (3, 11)): True, ("cp311-cp311", (3, 13)): False,
+                    ("cp312-cp312", (3, 11)): False, ("cp37-abi3", (3, 11)): True, ("cp37-abi3", (3, 13)): True,
+                    ("cp313-abi3", (3, 11)): False, ("py3-none", (3, 11)): True, ("py2.py3-none", (3, 13)): True}
+    for (tag, py), expected in python_cases.items():
+        assert wheels.wheel_fits(f"pkg-1.0-{tag}-win_amd64.whl", "windows-x64", py) == expected, (tag, py)
+
+
+MANIFEST_WITH_OLD_LISTS = """schema_version = "1.0.0"
+id = "x"  # comment [with brackets]
+platforms = [
+  "linux-x64",  # ]
+  "windows-x64",
+]
+wheels = ["./wheels/old-1.0-py3-none-any.whl"]
+version = "0.1.0"
+
+[permissions]
+files = "Read [things]"
+"""
+
+
+@pytest.mark.parametrize("text", [(REPO / "blender_manifest.toml").read_text(), MANIFEST_WITH_OLD_LISTS])
+def test_staged_manifest_gets_wheels_and_platforms_and_keeps_the_rest(text):
+    new_wheels = ["./wheels/a-1.0-cp311-cp311-win_amd64.whl", "./wheels/b-2.0-cp37-abi3-win_amd64.whl"]
+    result = tomllib.loads(staging.manifest_with_wheels(text, new_wheels, ["windows-x64"]))
+    before = tomllib.loads(text)
+    assert result.pop("wheels") == new_wheels
+    assert result.pop("platforms") == ["windows-x64"]
+    before.pop("wheels", None)
+    before.pop("platforms", None)
+    assert result == before
