@@ -121,37 +121,64 @@ class Camera:
         p = np.asarray(points, dtype=np.float64)
         return p @ self.R.T + self.t
 
-    def distort_normalized(self, xy) -> np.ndarray:
-        """Apply the lens model to normalised coordinates (x/z, y/z), (..., 2) -> (..., 2)."""
-        xy = np.asarray(xy, dtype=np.float64)
-        if self.dist.size == 0 or not np.any(self.dist):
-            return xy
+    def _distort(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """OpenCV's lens model (as in cv2.projectPoints) on normalised coordinates x = X/Z, y = Y/Z."""
         d = np.zeros(12)
         d[: self.dist.size] = self.dist
         k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
-        x, y = xy[..., 0], xy[..., 1]
         r2 = x * x + y * y
         r4 = r2 * r2
-        r6 = r4 * r2
-        radial = (1 + k1 * r2 + k2 * r4 + k3 * r6) / (1 + k4 * r2 + k5 * r4 + k6 * r6)
-        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
-        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        if k4 or k5 or k6:
+            radial = radial / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xy2 = 2 * x * y
+        xd = x * radial + p1 * xy2 + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + p2 * xy2
+        if s1 or s2 or s3 or s4:
+            xd += s1 * r2 + s2 * r4
+            yd += s3 * r2 + s4 * r4
+        return xd, yd
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.dist))
+
+    def distort_normalized(self, xy) -> np.ndarray:
+        """Apply the lens model to normalised coordinates (x/z, y/z), (..., 2) -> (..., 2)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        if not self.has_distortion:
+            return xy
+        xd, yd = self._distort(xy[..., 0], xy[..., 1])
         return np.stack([xd, yd], axis=-1)
 
     def project_with_depth(self, points) -> tuple[np.ndarray, np.ndarray]:
         """World points (..., 3) -> pixels (..., 2) and depth (...,) = camera z.
 
         Points at or behind the camera (depth <= 0) get meaningless pixels: mask them with depth.
+        Works on one flat (N, 3) block (one matmul, then column operations) to avoid batched matmuls.
         """
-        pc = self.to_camera(points)
-        z = pc[..., 2]
+        p = np.asarray(points, dtype=np.float64)
+        if p.shape[-1:] != (3,):
+            raise ValueError(f"points must have shape (..., 3); got {p.shape}")
+        lead = p.shape[:-1]
+        pc = p.reshape(-1, 3) @ self.R.T
+        pc += self.t
+        z = pc[:, 2].copy()
         with np.errstate(divide="ignore", invalid="ignore"):
-            xy = pc[..., :2] / z[..., None]
-        xy = self.distort_normalized(xy)
+            inv_z = 1.0 / z
+        x = pc[:, 0] * inv_z
+        y = pc[:, 1] * inv_z
+        if self.has_distortion:
+            x, y = self._distort(x, y)
         K = self.K
-        u = K[0, 0] * xy[..., 0] + K[0, 1] * xy[..., 1] + K[0, 2]
-        v = K[1, 1] * xy[..., 1] + K[1, 2]
-        return np.stack([u, v], axis=-1), z
+        uv = np.empty((x.shape[0], 2))
+        np.multiply(x, K[0, 0], out=uv[:, 0])
+        if K[0, 1]:
+            uv[:, 0] += K[0, 1] * y
+        uv[:, 0] += K[0, 2]
+        np.multiply(y, K[1, 1], out=uv[:, 1])
+        uv[:, 1] += K[1, 2]
+        return uv.reshape(lead + (2,)), z.reshape(lead)
 
     def project(self, points) -> np.ndarray:
         """World points (..., 3) -> pixels (..., 2), with distortion; any leading batch shape."""
@@ -162,7 +189,7 @@ class Camera:
         import cv2
 
         uv = np.asarray(uv, dtype=np.float64)
-        if self.dist.size == 0 or not np.any(self.dist):
+        if not self.has_distortion:
             return uv.copy()
         flat = uv.reshape(-1, 1, 2)
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)

@@ -302,3 +302,21 @@ def test_blender_native_camera_reads_back(bpy_module, fit, res, aspect):
     got = _blender_pixels(bpy, scene, obj, pts, *res)
     np.testing.assert_allclose(got, cam.project(pts), atol=0.01)
     np.testing.assert_allclose(got, pix, atol=0.01)
+
+
+def test_skew_and_normalised_distortion_against_references():
+    """Skew (cv2.projectPoints ignores it) against K @ [x_d, y_d, 1]; distort_normalized against cv2 with K = I."""
+    rng = np.random.default_rng(12)
+    cam = random_camera(rng, n_dist=8)
+    cam.K[0, 1] = 2.5
+    pts = rng.normal(size=(50, 3))
+    pc = pts @ cam.R.T + cam.t
+    xy, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), np.eye(3), cam.dist)
+    xy = xy.reshape(-1, 2)
+    np.testing.assert_allclose(cam.distort_normalized(pc[:, :2] / pc[:, 2:]), xy, atol=1e-12)
+    ref = np.hstack([xy, np.ones((50, 1))]) @ cam.K.T
+    np.testing.assert_allclose(cam.project(pts), ref[:, :2], atol=1e-9)
+    uv, depth = cam.project_with_depth(pts[0])
+    assert uv.shape == (2,) and depth.shape == ()
+    with pytest.raises(ValueError, match=r"\(\.\.\., 3\)"):
+        cam.project(np.zeros((4, 2)))
