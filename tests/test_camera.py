@@ -3,7 +3,7 @@ import cv2
 import numpy as np
 import pytest
 
-from markerless_mocap.core.camera import (BlenderCameraParams, Camera, CameraError, camera_from_blender,
+from markerless_mocap.core.camera import (Camera, CameraError, camera_from_blender,
                                           camera_to_blender, matrix_to_rodrigues, rodrigues_to_matrix)
 
 
