@@ -207,6 +207,15 @@ def test_missing_wheel_names_package_platform_and_the_cache_option(tmp_path, mon
     assert not list(tmp_path.glob("*.whl"))
 
 
+def test_corrupt_cached_wheel_is_named_with_the_fix(tmp_path, monkeypatch):
+    offline_pip(monkeypatch)
+    bad = tmp_path / "opencv_contrib_python_headless-4.11.0.86-cp37-abi3-manylinux_2_17_x86_64.manylinux2014_x86_64.whl"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    with pytest.raises(wheels.WheelUnavailableError) as err:
+        wheels.collect(PINS, [PLATFORM], [(3, 11)], tmp_path, log=lambda m: None)
+    assert bad.name in str(err.value) and "delete it" in str(err.value)
+
+
 def test_bad_platform_is_a_clear_cli_error(capsys):
     assert cli.main(["build", "--platforms", "linux-x64,amiga-68k"]) == 1
     err = capsys.readouterr().err

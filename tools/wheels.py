@@ -192,9 +192,13 @@ def download(cache_dir, name, specifier, platform, python_version, log=print):
 
 def wheel_requirements(wheel_path):
     """Requirement objects of the wheel's METADATA (Requires-Dist)."""
-    with zipfile.ZipFile(wheel_path) as zf:
-        meta_name = next(n for n in zf.namelist() if n.endswith(".dist-info/METADATA") and n.count("/") == 1)
-        meta = Parser().parsestr(zf.read(meta_name).decode("utf-8"))
+    try:
+        with zipfile.ZipFile(wheel_path) as zf:
+            meta_name = next(n for n in zf.namelist() if n.endswith(".dist-info/METADATA") and n.count("/") == 1)
+            meta = Parser().parsestr(zf.read(meta_name).decode("utf-8"))
+    except (zipfile.BadZipFile, StopIteration):
+        raise WheelUnavailableError(f"{wheel_path} is not a valid wheel (truncated download?): delete it and "
+                                    "build again to download it afresh") from None
     return [Requirement(r) for r in meta.get_all("Requires-Dist") or []]
 
 
