@@ -5,6 +5,7 @@ each platform (from the cache, else PyPI), list them in the staged manifest, the
 own blender_ext.py validate and zip it. The helpers live in tools/, which is not shipped in the
 zip: this command only works from the source repository.
 """
+import shutil
 import sys
 import tempfile
 import time
@@ -73,6 +74,16 @@ def build_extension(out_dir, platforms=None, python_versions=((3, 11),), cache_d
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
 
+    tag_args = []
+    tags = extension_builder.valid_tags_path()
+    if tags is not None:
+        tag_args = ["--valid-tags", tags]  # the tag list Blender's own `extension build` checks
+    # Check the repository's manifest before minutes of downloads, naming the file to fix.
+    ok, output = extension_builder.run("validate", *tag_args, repo_root)
+    if not ok:
+        raise BuildFailedError(f"Blender's validator rejected {Path(repo_root) / 'blender_manifest.toml'}; "
+                               f"fix it there:\n{output}")
+
     pins = wheels.read_pins(Path(repo_root) / "requirements.txt")
     log(f"collecting wheels for {', '.join(platforms)} (cache: {cache_dir})")
     wheel_paths, notes = wheels.collect(pins, platforms, list(python_versions), cache_dir, log)
@@ -89,19 +100,14 @@ def build_extension(out_dir, platforms=None, python_versions=((3, 11),), cache_d
             try:
                 (stage / "wheels" / path.name).hardlink_to(path)
             except OSError:
-                import shutil
                 shutil.copy2(path, stage / "wheels" / path.name)
         manifest_text = (Path(repo_root) / "blender_manifest.toml").read_text()
         (stage / "blender_manifest.toml").write_text(staging.manifest_with_wheels(
             manifest_text, [f"./wheels/{p.name}" for p in wheel_paths], platforms))
 
-        tag_args = []
-        tags = extension_builder.valid_tags_path()
-        if tags is not None:
-            tag_args = ["--valid-tags", tags]
         ok, output = extension_builder.run("validate", *tag_args, stage)
         if not ok:
-            raise BuildFailedError(f"Blender's validator rejected the package:\n{output}")
+            raise BuildFailedError(f"Blender's validator rejected the staged package (wheels added):\n{output}")
         build_args = ["build", "--source-dir", stage, "--output-dir", out_dir, *tag_args]
         if split_platforms:
             build_args.append("--split-platforms")
