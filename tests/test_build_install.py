@@ -189,7 +189,8 @@ def test_second_build_is_offline_and_fast(build, tmp_path, monkeypatch, capsys):
     out = capsys.readouterr().out
     assert code == 0, out
     assert "downloading" not in out
-    zip_path = tmp_path / f"{PACKAGE}-0.1.0-linux_x64.zip"
+    version = tomllib.loads((REPO / "blender_manifest.toml").read_text())["version"]
+    zip_path = tmp_path / f"{PACKAGE}-{version}-linux_x64.zip"
     assert f"{zip_path}  " in out and " MB" in out  # path and size printed
     with zipfile.ZipFile(zip_path) as zf, zipfile.ZipFile(build["zip"]) as ref:
         assert {n for n in zf.namelist() if n.endswith(".whl")} == {n for n in ref.namelist() if n.endswith(".whl")}
