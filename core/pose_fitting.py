@@ -1,0 +1,77 @@
+"""Fit DOF vectors to target bone positions (and optionally orientations).
+
+Used to bring motion-capture clips into the tracker's DOF space (anatomical prior, dynamics)
+and to express ground-truth joint positions as poses. Damped Gauss-Newton with a finite-difference
+Jacobian computed in ONE batched FK call per iteration, warm-started frame to frame.
+"""
+import numpy as np
+
+from .rotations import matrix_to_rotvec
+
+
+def _residuals(body, poses, target_heads, target_rots, rot_bones, rot_weight):
+    M = body.pose_matrices(poses)  # (P,B,4,4)
+    res = [(M[:, :, :3, 3] - target_heads).reshape(len(poses), -1)]
+    if target_rots is not None and len(rot_bones):
+        diff = M[:, rot_bones, :3, :3] - target_rots[rot_bones]
+        res.append(rot_weight * diff.reshape(len(poses), -1))
+    return np.concatenate(res, axis=1)
+
+
+def fit_pose(body, target_heads, x0, target_rots=None, rot_bones=(), rot_weight=0.1, iterations=12,
+             fixed_bones_weight=None):
+    """One frame: x minimising |heads(x) - target|^2 (+ weighted orientation residuals), within limits."""
+    x = np.clip(np.asarray(x0, dtype=np.float64).copy(), body.lower, body.upper)
+    rot_bones = np.asarray(rot_bones, dtype=np.int64)
+    D = body.n_dof
+    eps = 1e-5
+    damping = 1e-3
+    r = _residuals(body, x[None], target_heads, target_rots, rot_bones, rot_weight)[0]
+    cost = r @ r
+    for _ in range(iterations):
+        probes = x[None] + np.vstack([np.zeros(D), eps * np.eye(D)])
+        R = _residuals(body, probes, target_heads, target_rots, rot_bones, rot_weight)
+        J = (R[1:] - R[0]).T / eps  # (n_res, D)
+        JtJ = J.T @ J
+        g = J.T @ R[0]
+        improved = False
+        for _ in range(6):
+            step = np.linalg.solve(JtJ + damping * (np.diag(np.diag(JtJ)) + 1e-9 * np.eye(D)), -g)
+            x_new = np.clip(x + step, body.lower, body.upper)
+            r_new = _residuals(body, x_new[None], target_heads, target_rots, rot_bones, rot_weight)[0]
+            if r_new @ r_new < cost:
+                x, cost = x_new, r_new @ r_new
+                damping = max(damping / 3, 1e-7)
+                improved = True
+                break
+            damping *= 10
+        if not improved or np.linalg.norm(step) < 1e-7:
+            break
+    return x, float(np.sqrt(cost / max(1, len(target_heads))))
+
+
+def initial_root(body, target_heads):
+    """Root translation + rotation vector that best align the rest pose with target head positions."""
+    x = body.default_pose()
+    rest = body.joint_positions(x[None])[0]
+    r = body.root_bone
+    a = rest - rest[r]
+    b = target_heads - target_heads[r]
+    U, _, Vt = np.linalg.svd(b.T @ a)
+    d = np.sign(np.linalg.det(U @ Vt))
+    R = U @ np.diag([1, 1, d]) @ Vt
+    x[body.translation_dofs] = target_heads[r]
+    x[body.root_rotation_dofs] = matrix_to_rotvec(R)
+    return x
+
+
+def fit_pose_sequence(body, heads, rotations=None, rot_bones=(), x0=None, iterations=12):
+    """(F,B,3) world heads [+ (F,B,3,3) world bone rotations] -> (F,D) poses and per-frame RMS residual."""
+    poses, errors = [], []
+    x = initial_root(body, heads[0]) if x0 is None else np.asarray(x0, dtype=np.float64)
+    for f in range(len(heads)):
+        rots = None if rotations is None else rotations[f]
+        x, err = fit_pose(body, heads[f], x, rots, rot_bones, iterations=iterations)
+        poses.append(x)
+        errors.append(err)
+    return np.array(poses), np.array(errors)

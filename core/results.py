@@ -1,0 +1,111 @@
+"""The result folder (architecture.md): written after every solved frame, so a run that stops for
+any reason keeps what it solved, and `--resume` continues from the checkpoint exactly.
+
+    joints.npz   names, frames, positions (F,J,3) world metres (every bone's head)
+    poses.npz    dof_names, frames, poses (F,D)
+    report.json  settings, seed, per-frame energy and seconds, totals, software versions
+    checkpoint.pkl  the tracker's state after the last solved frame (optimiser particles, RNG, colour model)
+"""
+import json
+import os
+import pickle
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .tracking import FrameEstimate
+
+
+def _atomic_write(path, write):
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        write(fh)
+    os.replace(tmp, path)
+
+
+def software_versions():
+    import cv2
+    import scipy
+
+    versions = {"python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
+                "scipy": scipy.__version__}
+    try:
+        import numba
+
+        versions["numba"] = numba.__version__
+    except ImportError:
+        pass
+    try:
+        import bpy
+
+        versions["blender"] = bpy.app.version_string
+    except ImportError:
+        pass
+    return versions
+
+
+class ResultWriter:
+    def __init__(self, out_dir, body, settings, info=None):
+        self.out = Path(out_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.body = body
+        self.settings = settings
+        self.info = dict(info or {})
+        self.estimates = []
+        self.started = time.time()
+
+    @property
+    def checkpoint_path(self):
+        return self.out / "checkpoint.pkl"
+
+    def add(self, estimate, tracker_state=None):
+        self.estimates.append(estimate)
+        self.write()
+        if tracker_state is not None:
+            _atomic_write(self.checkpoint_path, lambda fh: pickle.dump(
+                {"estimates": self.estimates, "state": tracker_state, "settings": self.settings.to_dict()}, fh))
+
+    def write(self):
+        est = self.estimates
+        frames = np.array([e.frame for e in est], dtype=np.int64)
+        names = np.array(self.body.skeleton.bone_names)
+        joints = np.array([e.joints for e in est]).reshape(len(est), len(names), 3)
+        poses = np.array([e.pose for e in est]).reshape(len(est), self.body.n_dof)
+        _atomic_write(self.out / "joints.npz", lambda fh: np.savez(fh, names=names, frames=frames, positions=joints))
+        _atomic_write(self.out / "poses.npz", lambda fh: np.savez(
+            fh, dof_names=np.array(self.body.dof_names), frames=frames, poses=poses))
+        report = {
+            "settings": self.settings.to_dict(),
+            "seed": self.settings.seed,
+            **self.info,
+            "frames": [{"frame": e.frame, "energy": e.energy, "seconds": e.seconds, "evaluations": e.evaluations}
+                       for e in est],
+            "totals": {"frames": len(est), "seconds": float(sum(e.seconds for e in est)),
+                       "seconds_per_frame": float(np.mean([e.seconds for e in est[1:]])) if len(est) > 1 else None,
+                       "wall_seconds": time.time() - self.started},
+            "software": software_versions(),
+        }
+        _atomic_write(self.out / "report.json", lambda fh: fh.write(json.dumps(report, indent=1).encode()))
+
+    def load_checkpoint(self):
+        """(estimates, tracker state) of an earlier run in this folder, or (None, None)."""
+        if not self.checkpoint_path.exists():
+            return None, None
+        with open(self.checkpoint_path, "rb") as fh:
+            data = pickle.load(fh)
+        if data["settings"] != self.settings.to_dict():
+            raise ValueError(f"{self.checkpoint_path}: the earlier run used different settings "
+                             f"({data['settings']}); resume with the same options or choose another --out")
+        self.estimates = list(data["estimates"])
+        return self.estimates, data["state"]
+
+
+def load_joints(path):
+    """joints.npz or gt_joints.npz -> (names list, frames (F,), positions (F,J,3))."""
+    with np.load(path) as data:
+        return [str(n) for n in data["names"]], data["frames"].astype(np.int64), data["positions"]
+
+
+__all__ = ["ResultWriter", "FrameEstimate", "load_joints", "software_versions"]

@@ -1,0 +1,236 @@
+"""The per-frame tracking loop: initialise, predict, optimise, adapt colour, checkpoint.
+
+The same loop serves the command line, the Blender modal operator and the tests. It never touches
+Blender: it reads a Capture, scores poses with an EnergyModel and hands each frame's estimate to a
+callback as soon as it is solved, so nothing solved is ever lost.
+
+Root rotation (algorithms.md 1.4): the optimisers see the root rotation relative to an anchor
+(the previous estimates' orientation), so the particle arithmetic stays Euclidean and never meets
+the pi wrap of rotation vectors, even when the subject turns around. The anchor moves with the
+subject; stored particles are re-expressed when it does.
+"""
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .features import BackgroundModel, compute_view_features
+from .optimizers import PoseSpace, make_optimizer
+from .proxy import make_proxy
+from .rotations import matrix_to_rotvec, rotvec_to_matrix
+
+REANCHOR_ANGLE = np.deg2rad(20.0)
+
+
+@dataclass
+class TrackingSettings:
+    algorithm: str = "isa"
+    likelihood: str = "silh+edge"
+    particles: int = 200
+    iterations: int = 15
+    seed: int = 0
+    backend: str = "auto"
+    energy_scale: float | None = None  # None: the EnergyModel's default resolution
+    background: str = "auto"  # auto (plate if present, else median) | plate | median | mog2 | knn
+    background_frames: int = 25
+    proxy_triangles: int = 2000
+    init_particles: int = 500
+    init_iterations: int = 30
+    init_translation: float = 0.25  # metres: half width of the initial search box
+    init_yaw: float = float(np.deg2rad(35.0))
+    color_adaptation: float | None = None  # None: the likelihood's default
+    optimizer_options: dict = field(default_factory=dict)
+
+    @property
+    def budget(self):
+        return self.particles * self.iterations
+
+    def to_dict(self):
+        return asdict(self)
+
+
+@dataclass
+class FrameEstimate:
+    frame: int
+    pose: np.ndarray  # absolute DOF vector
+    joints: np.ndarray  # (B,3) world bone heads
+    energy: float
+    seconds: float
+    evaluations: int
+
+
+class Tracker:
+    """Tracks one subject through a capture. Call `initialise` once, then `track(frame)` per frame."""
+
+    def __init__(self, body, capture, settings=None, prior=None, proxy=None, energy_model=None):
+        from .likelihood import EnergyModel  # heavy (numba): import when a tracker is made
+
+        self.body = body
+        self.capture = capture
+        self.settings = settings or TrackingSettings()
+        self.proxy = proxy or make_proxy(body, self.settings.proxy_triangles)
+        kwargs = {} if self.settings.energy_scale is None else {"scale": self.settings.energy_scale}
+        self.energy = energy_model or EnergyModel(body, self.proxy, capture.cameras, self.settings.likelihood,
+                                                  prior=prior, backend=self.settings.backend, **kwargs)
+        self.scale = self.energy.scale
+        self.backgrounds = self._background_models()
+        self.space = PoseSpace.with_default_scale(body.lower, body.upper, body.dof_names,
+                                                  np.isin(np.arange(body.n_dof), body.translation_dofs))
+        self.optimizer = make_optimizer(self.settings.algorithm, self.space, budget=self.settings.budget,
+                                        seed=self.settings.seed, **self._optimizer_kwargs())
+        self.anchor = np.eye(3)
+        self.history = []  # relative poses of the solved frames (most recent last)
+        self.estimates = []
+
+    # ------------------------------------------------------------------ set-up
+    def _optimizer_kwargs(self):
+        kw = dict(self.settings.optimizer_options)
+        if self.settings.algorithm in ("isa", "apf"):
+            kw.setdefault("n", self.settings.particles)
+        return kw
+
+    def _background_models(self):
+        cap, mode = self.capture, self.settings.background
+        models = {}
+        for cam in cap.cameras:
+            plate = (cap.backgrounds or {}).get(cam.name)
+            if mode in ("auto", "plate") and plate is not None:
+                models[cam.name] = BackgroundModel.from_plate(plate)
+                continue
+            if mode == "plate":
+                raise FileNotFoundError(f"no background plate for camera {cam.name!r}: expected "
+                                        f"background/{cam.name}.png in the capture, or use --background median")
+            n = cap.frames.n_frames
+            picks = np.unique(np.linspace(0, n - 1, min(self.settings.background_frames, n)).round().astype(int))
+            frames = [cap.frames.read_camera(cam.name, int(f)) for f in picks]
+            models[cam.name] = BackgroundModel.from_frames(frames, method="median" if mode == "auto" else mode)
+        return models
+
+    def features(self, frame):
+        images = self.capture.frames.read(frame)
+        return [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
+                                      diffuse=self.energy.weights.color > 0)
+                for cam in self.capture.cameras]
+
+    # ------------------------------------------------------------------ root anchoring
+    def to_absolute(self, poses):
+        poses = np.array(poses, dtype=np.float64, copy=True)
+        rd = self.body.root_rotation_dofs
+        poses[..., rd] = matrix_to_rotvec(rotvec_to_matrix(poses[..., rd]) @ self.anchor)
+        return poses
+
+    def to_relative(self, poses, anchor=None):
+        anchor = self.anchor if anchor is None else anchor
+        poses = np.array(poses, dtype=np.float64, copy=True)
+        rd = self.body.root_rotation_dofs
+        poses[..., rd] = matrix_to_rotvec(rotvec_to_matrix(poses[..., rd]) @ anchor.T)
+        return poses
+
+    def _energy_fn(self, poses):
+        return self.energy(self.to_absolute(poses))
+
+    def _reanchor(self, relative_estimate):
+        """Move the anchor onto the latest estimate; re-express every stored pose array."""
+        rd = self.body.root_rotation_dofs
+        if np.linalg.norm(relative_estimate[rd]) < REANCHOR_ANGLE:
+            return
+        old = self.anchor
+        new = rotvec_to_matrix(relative_estimate[rd]) @ old
+        self.anchor = new
+
+        def convert(poses):
+            return self.to_relative(self.to_absolute_with(poses, old), new)
+
+        for name, value in vars(self.optimizer).items():
+            if isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[-1] == self.body.n_dof \
+                    and value.dtype.kind == "f" and name not in ("lower", "upper", "scale"):
+                setattr(self.optimizer, name, convert(value))
+        self.history = [convert(h) for h in self.history]
+
+    def to_absolute_with(self, poses, anchor):
+        saved, self.anchor = self.anchor, anchor
+        try:
+            return self.to_absolute(poses)
+        finally:
+            self.anchor = saved
+
+    # ------------------------------------------------------------------ tracking
+    def initialise(self, frame, rough_pose=None, initial_pose=None):
+        """First frame: a global ISA search around the subject's rough placement (or a given pose)."""
+        t0 = time.perf_counter()
+        body, s = self.body, self.settings
+        rough = body.default_pose() if rough_pose is None else np.asarray(rough_pose, float)
+        self.anchor = rotvec_to_matrix(rough[body.root_rotation_dofs])
+        feats = self.features(frame)
+        self.energy.set_reference_pose(rough)
+        self.energy.set_frame(feats)
+        if initial_pose is None:
+            from .optimizers.isa import InteractingSimulatedAnnealing
+
+            searcher = InteractingSimulatedAnnealing(self.space, seed=s.seed, n=min(s.particles, s.init_particles))
+            spread = np.where(np.isin(np.arange(body.n_dof), body.root_rotation_dofs),
+                              np.deg2rad(12.0), self.space.scale * 4)
+            x0 = self.to_relative(rough)
+            result = searcher.global_init(
+                self._energy_fn, x0, spread, n=s.init_particles, iterations=s.init_iterations, joints="around",
+                translation_dofs=body.translation_dofs, translation_half_width=s.init_translation,
+                yaw_dof=None)
+            pose = self.to_absolute(result.estimate)
+            evaluations = result.evaluations
+        else:
+            pose = np.asarray(initial_pose, float)
+            evaluations = 0
+        energy = float(self.energy(pose[None])[0])
+        if self.energy.weights.color > 0:
+            self.energy.init_color_model(pose)
+        self.optimizer.start(self.to_relative(pose))
+        return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
+
+    def track(self, frame):
+        """Solve one frame after the initial one."""
+        t0 = time.perf_counter()
+        feats = self.features(frame)
+        self.energy.set_frame(feats)
+        if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
+            self.optimizer.set_frame_problem(self._icp_problem(feats))
+        result = self.optimizer.track_frame(self._energy_fn, list(self.history))
+        pose = self.to_absolute(result.estimate)
+        lam = self.settings.color_adaptation
+        lam = self.energy.weights.color_adaptation if lam is None else lam
+        if self.energy.weights.color > 0 and lam > 0:
+            self.energy.adapt_color_model(pose, lam)
+        est = self._record(frame, pose, result.energy, time.perf_counter() - t0, result.evaluations)
+        self._reanchor(self.history[-1])
+        return est
+
+    def _icp_problem(self, feats):
+        from .optimizers.icp import IcpProblem
+
+        cameras = [c.scaled(self.scale) for c in self.capture.cameras]
+        return IcpProblem(body=self.body, proxy=self.proxy, cameras=cameras,
+                          silhouettes=[f.silhouette for f in feats], to_absolute=self.to_absolute,
+                          prior=getattr(self.energy, "prior", None))
+
+    def _record(self, frame, pose, energy, seconds, evaluations):
+        self.history.append(self.to_relative(pose))
+        self.history = self.history[-3:]
+        joints = self.body.joint_positions(pose[None])[0]
+        est = FrameEstimate(int(frame), pose, joints, float(energy), float(seconds), int(evaluations))
+        self.estimates.append(est)
+        return est
+
+    # ------------------------------------------------------------------ checkpoints
+    def state(self):
+        """Everything needed to continue exactly where this tracker stands (picklable)."""
+        return {"optimizer": self.optimizer, "anchor": self.anchor, "history": self.history,
+                "color_model": self.energy.color_state() if hasattr(self.energy, "color_state") else None,
+                "reference_pose": getattr(self.energy, "reference_pose", None)}
+
+    def restore(self, state):
+        self.optimizer = state["optimizer"]
+        self.anchor = state["anchor"]
+        self.history = list(state["history"])
+        if state.get("reference_pose") is not None:
+            self.energy.set_reference_pose(state["reference_pose"])
+        if state.get("color_model") is not None:
+            self.energy.set_color_state(state["color_model"])
