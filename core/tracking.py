@@ -234,3 +234,17 @@ class Tracker:
             self.energy.set_reference_pose(state["reference_pose"])
         if state.get("color_model") is not None:
             self.energy.set_color_state(state["color_model"])
+
+
+def run_tracker(tracker, frames, initial_pose=None, rough_pose=None, on_frame=None, should_stop=None):
+    """Track `frames` (the first one initialises). Returns the list of FrameEstimates."""
+    out = []
+    for i, frame in enumerate(frames):
+        if should_stop is not None and should_stop():
+            break
+        est = tracker.initialise(frame, rough_pose=rough_pose, initial_pose=initial_pose) if i == 0 \
+            else tracker.track(frame)
+        out.append(est)
+        if on_frame is not None:
+            on_frame(est)
+    return out

@@ -1,0 +1,61 @@
+"""Overlay images: the tracked body drawn over the footage, one video per camera, to check by eye."""
+import colorsys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+
+def part_colours(n):
+    """Distinct BGR colours per body part."""
+    return [tuple(int(255 * c) for c in colorsys.hsv_to_rgb(i / max(n, 1), 0.8, 1.0))[::-1] for i in range(n)]
+
+
+def draw_body(image, camera, vertices, faces, face_part, colours, alpha=0.45):
+    """Painter's algorithm (far to near) with per-part colours, blended over `image` (BGR uint8)."""
+    uv, depth = camera.project_with_depth(vertices)
+    tri_depth = depth[faces].mean(axis=1)
+    front = np.all(depth[faces] > 1e-3, axis=1)
+    layer = image.copy()
+    mask = np.zeros(image.shape[:2], np.uint8)
+    pts = np.round(uv[faces] * 16).astype(np.int32)  # 4 fractional bits for sub-pixel edges
+    for f in np.argsort(-tri_depth):
+        if not front[f]:
+            continue
+        cv2.fillConvexPoly(layer, pts[f], colours[face_part[f]], lineType=cv2.LINE_AA, shift=4)
+        cv2.fillConvexPoly(mask, pts[f], 255, shift=4)
+    out = image.copy()
+    sel = mask > 0
+    out[sel] = (alpha * layer[sel] + (1 - alpha) * image[sel]).astype(np.uint8)
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    cv2.drawContours(out, contours, -1, (0, 255, 255), 1, cv2.LINE_AA)
+    return out
+
+
+class OverlayWriter:
+    """One mp4 per camera in <out>/overlay/, a frame appended per solved frame."""
+
+    def __init__(self, out_dir, cameras, fps):
+        self.folder = Path(out_dir) / "overlay"
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.cameras = cameras
+        self.fps = fps
+        self.writers = {}
+
+    def add(self, images, vertices, faces, face_part, n_parts, label=""):
+        colours = part_colours(n_parts)
+        for cam in self.cameras:
+            img = draw_body(images[cam.name], cam, vertices, faces, face_part, colours)
+            if label:
+                cv2.putText(img, label, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+            w = self.writers.get(cam.name)
+            if w is None:
+                path = self.folder / f"{cam.name}.mp4"
+                w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (img.shape[1], img.shape[0]))
+                self.writers[cam.name] = w
+            w.write(img)
+
+    def close(self):
+        for w in self.writers.values():
+            w.release()
+        self.writers = {}

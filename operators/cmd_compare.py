@@ -1,0 +1,117 @@
+"""`compare`: the paper's Table 3 on our captures — every optimiser at the same budget and seeds.
+
+All runs start from the same initial pose (one global ISA search on the first frame, as in the
+paper), use the same anatomical prior and the same number of energy evaluations per frame.
+Writes a Markdown table and ends with one JSON line of the figures.
+"""
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..core.evaluation import joint_errors, summarise
+from ..core.results import ResultWriter
+from ..core.tracking import Tracker, TrackingSettings, run_tracker
+from .cmd_track import Progress, open_subject, parse_frames
+
+# (label, algorithm, likelihood) as in the paper's Table 3 (ICP uses silhouettes only).
+DEFAULT_ROWS = (
+    ("PF (s^Ch+c)", "pf", "silhch+color"),
+    ("ICP (s)", "icp", "silh"),
+    ("APF (s^Ch+c)", "apf", "silhch+color"),
+    ("FSA (s^Ch+c)", "fsa", "silhch+color"),
+    ("ISA (s^Ch+c)", "isa", "silhch+color"),
+    ("ISA (s+e)", "isa", "silh+edge"),
+)
+
+
+def add_arguments(p):
+    p.add_argument("--scene", type=Path, help="SUBJECT.blend (default: CAPTURE/subject.blend)")
+    p.add_argument("--capture", type=Path, required=True)
+    p.add_argument("--truth", type=Path, help="ground truth joints (default: CAPTURE/gt_joints.npz)")
+    p.add_argument("--out", type=Path, default=Path("results/compare"))
+    p.add_argument("--frames", help="capture frames A-B (default: all)")
+    p.add_argument("--seeds", default="0", help="comma-separated seeds (default: 0)")
+    p.add_argument("--particles", type=int, default=200)
+    p.add_argument("--iterations", type=int, default=15)
+    p.add_argument("--rows", help="subset of rows by algorithm:likelihood, e.g. isa:silh+edge,apf:silhch+color")
+    p.add_argument("--backend", default="auto", choices=("auto", "numpy", "fast"))
+
+
+def _rows(spec):
+    if not spec:
+        return DEFAULT_ROWS
+    rows = []
+    for item in spec.split(","):
+        algo, _, lik = item.partition(":")
+        rows.append((f"{algo.upper()} ({lik})", algo, lik or "silh+edge"))
+    return rows
+
+
+def run(args):
+    from ..addon.scene_bridge import body_from_blender, find_armature
+    from ..core.capture.capture import load_capture
+    from .track_session import build_prior
+
+    capture_dir = args.capture
+    scene = open_subject(args.scene or capture_dir / "subject.blend")
+    truth = args.truth or capture_dir / "gt_joints.npz"
+    body = body_from_blender(find_armature(scene), None, scene)
+    capture = load_capture(capture_dir)
+    frames = list(parse_frames(args.frames) or range(capture.frames.n_frames))
+    seeds = [int(s) for s in args.seeds.split(",")]
+    rows = _rows(args.rows)
+    prior = build_prior(body)
+    budget = args.particles * args.iterations
+    # One common initial pose per seed (the paper: "the same initial pose is used for all approaches").
+    init = {}
+    results = []
+    for label, algo, lik in rows:
+        for seed in seeds:
+            settings = TrackingSettings(algorithm=algo, likelihood=lik, particles=args.particles,
+                                        iterations=args.iterations, seed=seed, backend=args.backend)
+            tracker = Tracker(body, capture, settings, prior=prior)
+            if seed not in init:
+                init_settings = TrackingSettings(likelihood="silh+edge", seed=seed, backend=args.backend)
+                init_tracker = Tracker(body, capture, init_settings, prior=prior, proxy=tracker.proxy)
+                init[seed] = init_tracker.initialise(frames[0], rough_pose=body.default_pose()).pose
+            out = args.out / f"{algo}_{lik.replace('+', '-')}_seed{seed}"
+            writer = ResultWriter(out, body, settings, info={"capture": str(capture_dir), "label": label})
+            progress = Progress(len(frames))
+            print(f"== {label}, seed {seed}", file=sys.stderr)
+            t0 = time.perf_counter()
+
+            def on_frame(est):
+                writer.add(est)
+                progress(est)
+
+            ests = run_tracker(tracker, frames, initial_pose=init[seed], on_frame=on_frame)
+            seconds = (time.perf_counter() - t0) / max(1, len(ests) - 1)
+            f, e = joint_errors(out / "joints.npz", truth)
+            s = summarise(f[1:], e[1:])  # frame 1 is the common initial pose
+            results.append({"label": label, "algorithm": algo, "likelihood": lik, "seed": seed,
+                            "mean_mm": s.mean_mm, "std_mm": s.std_mm, "max_mm": s.max_mm,
+                            "seconds_per_frame": seconds, "evaluations_per_frame": budget})
+    table = markdown_table(results, capture_dir, len(frames), budget, seeds)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "compare.md").write_text(table)
+    print(table)
+    print(json.dumps({"capture": str(capture_dir), "frames": len(frames), "budget": budget, "seeds": seeds,
+                      "rows": results}))
+    return 0
+
+
+def markdown_table(results, capture, n_frames, budget, seeds):
+    lines = [f"3D error over 15 joints (mm, mean +- std over frames; mean over seeds {seeds}) on {capture}, "
+             f"{n_frames} frames, {budget} energy evaluations per frame", "",
+             "| optimiser (likelihood) | error (mm) | max (mm) | s / frame |", "|---|---|---|---|"]
+    labels = list(dict.fromkeys(r["label"] for r in results))
+    for label in labels:
+        rs = [r for r in results if r["label"] == label]
+        mean = np.mean([r["mean_mm"] for r in rs])
+        std = np.mean([r["std_mm"] for r in rs])
+        lines.append(f"| {label} | {mean:.1f} +- {std:.1f} | {max(r['max_mm'] for r in rs):.0f} | "
+                     f"{np.mean([r['seconds_per_frame'] for r in rs]):.2f} |")
+    return "\n".join(lines) + "\n"

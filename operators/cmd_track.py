@@ -1,0 +1,124 @@
+"""`track`: track a capture with the rigged subject of a .blend and write the result folder."""
+import sys
+import time
+from pathlib import Path
+
+from ..core.tracking import TrackingSettings
+
+ALGORITHMS = ("isa", "apf", "pf", "fsa", "icp")
+LIKELIHOOD_NAMES = ("silh+edge", "silh+edgech", "silhch+color", "silh", "silhch")
+
+
+def parse_frames(text):
+    """'A-B' (inclusive) or 'A' -> range; capture frames count from 0."""
+    if text is None:
+        return None
+    try:
+        a, _, b = text.partition("-")
+        start, end = int(a), int(b) if b else int(a)
+    except ValueError:
+        raise SystemExit(f"--frames must look like 0-59 (inclusive, capture frames from 0), got {text!r}")
+    if end < start:
+        raise SystemExit(f"--frames {text}: the end comes before the start")
+    return range(start, end + 1)
+
+
+def add_tracking_options(p):
+    p.add_argument("--algorithm", choices=ALGORITHMS, default="isa", help="optimiser (default: isa)")
+    p.add_argument("--likelihood", choices=LIKELIHOOD_NAMES, default="silh+edge",
+                   help="energy terms (default: silh+edge)")
+    p.add_argument("--particles", type=int, default=200, help="particles (ISA/APF); budget = particles x iterations")
+    p.add_argument("--iterations", type=int, default=15, help="annealing iterations/layers per frame")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--backend", choices=("auto", "numpy", "fast", "gpu"), default="auto",
+                   help="likelihood backend: fast (numba CPU), numpy (reference), gpu (falls back to fast)")
+    p.add_argument("--background", choices=("auto", "plate", "median", "mog2", "knn"), default="auto",
+                   help="background model: plate if the capture has background/<cam>.png, else temporal median")
+
+
+def settings_from_args(args):
+    backend = "fast" if args.backend == "gpu" else args.backend
+    if args.backend == "gpu":
+        print("markerless_mocap: the GLSL backend is not available in this build; using the fast CPU path",
+              file=sys.stderr)
+    return TrackingSettings(algorithm=args.algorithm, likelihood=args.likelihood, particles=args.particles,
+                            iterations=args.iterations, seed=args.seed, backend=backend, background=args.background)
+
+
+def add_arguments(p):
+    p.add_argument("--scene", type=Path, help="SUBJECT.blend holding the armature and its skinned mesh "
+                   "(not needed inside `blender --background SUBJECT.blend --command markerless_mocap track`)")
+    p.add_argument("--capture", type=Path, required=True, help="capture folder (calibration + videos/)")
+    p.add_argument("--out", type=Path, required=True, help="result folder")
+    p.add_argument("--frames", help="capture frames A-B, inclusive, from 0 (default: all)")
+    p.add_argument("--armature", help="armature to track if the scene has several")
+    p.add_argument("--resume", action="store_true", help="continue after the last solved frame in --out")
+    p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
+    p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
+    add_tracking_options(p)
+
+
+class Progress:
+    """`frame k of n, energy, s/frame, time left` on stderr."""
+
+    def __init__(self, total, done=0):
+        self.total, self.done, self.start = total, done, time.perf_counter()
+        self.solved_here = 0
+
+    def __call__(self, est):
+        self.done += 1
+        self.solved_here += 1
+        rate = (time.perf_counter() - self.start) / self.solved_here
+        left = rate * (self.total - self.done)
+        print(f"frame {self.done} of {self.total} (capture frame {est.frame}): energy {est.energy:.4f}, "
+              f"{est.seconds:.2f} s/frame, about {left / 60:.1f} min left", file=sys.stderr, flush=True)
+
+
+def open_subject(scene_path):
+    import bpy
+
+    if scene_path is not None:
+        if not scene_path.exists():
+            raise SystemExit(f"--scene {scene_path}: no such file")
+        bpy.ops.wm.open_mainfile(filepath=str(scene_path.resolve()))
+    return bpy.context.scene
+
+
+def run_session(session, progress=None, log=print):
+    progress = progress or Progress(session.n_total, session.n_done)
+    while True:
+        est = session.solve_next()
+        if est is None:
+            break
+        session.key(est)
+        progress(est)
+    return session
+
+
+def run(args):
+    from ..addon.scene_bridge import SubjectError, find_armature
+    from .track_session import TrackSession
+
+    scene = open_subject(args.scene)
+    try:
+        armature = find_armature(scene, args.armature)
+        session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args),
+                               frames=parse_frames(args.frames), resume=args.resume,
+                               log=lambda m: print(m, file=sys.stderr))
+    except (SubjectError, ValueError, FileNotFoundError) as exc:
+        print(f"markerless_mocap track: {exc}", file=sys.stderr)
+        return 2
+    if args.resume:
+        session.key_all()
+    try:
+        run_session(session)
+    except KeyboardInterrupt:
+        print(f"interrupted: {session.n_done} frames solved and saved in {args.out} (use --resume to continue)",
+              file=sys.stderr)
+        return 130
+    written = session.finish(export=not args.no_export, overlays=not args.no_overlays,
+                             save_blend=not args.no_export)
+    print(f"tracked {session.n_done} frames -> {args.out}", file=sys.stderr)
+    for k, v in written.items():
+        print(f"  {k}: {v}", file=sys.stderr)
+    return 0

@@ -1,0 +1,141 @@
+"""One tracking run, shared by the command line and the modal Track operator.
+
+Construction and `key`/`finish` run on Blender's main thread (they touch bpy); `solve_next` is pure
+engine work and may run in a worker thread. Every solved frame is written to the result folder at
+once (joints, poses, report, checkpoint), so a cancelled or crashed run loses nothing and `resume`
+continues exactly where it stopped.
+"""
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from ..addon import scene_bridge
+from ..core.capture.capture import load_capture
+from ..core.results import ResultWriter
+from ..core.tracking import Tracker, TrackingSettings
+
+
+def training_clips():
+    """Bundled CMU clips for the anatomical prior (see core/data/motion/SOURCE.txt)."""
+    from ..core.mocap.bvh import read_bvh
+
+    folder = Path(__file__).resolve().parents[1] / "core" / "data" / "motion"
+    return [read_bvh(p) for p in sorted(folder.glob("*.bvh"))]
+
+
+def build_prior(body, seed=0, exclude=None):
+    from ..core.prior import AnatomicalPrior
+
+    return AnatomicalPrior.from_motion(body, training_clips(), seed=seed, exclude=exclude)
+
+
+class TrackSession:
+    def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
+                 mesh_obj=None, frame_offset=None, prior=None, log=None):
+        self.scene = scene
+        self.armature = armature_obj
+        self.settings = settings or TrackingSettings()
+        self.log = log or (lambda msg: None)
+        self.body = scene_bridge.body_from_blender(armature_obj, mesh_obj, scene)
+        self.capture = load_capture(capture_dir)
+        n = self.capture.frames.n_frames
+        self.all_frames = list(range(n)) if frames is None else [f for f in frames if 0 <= f < n]
+        if not self.all_frames:
+            raise ValueError(f"no frames to track: the capture has frames 0-{n - 1}, asked for "
+                             f"{frames[0]}-{frames[-1]}" if frames else "the capture has no frames")
+        self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
+        self.rough_pose = self.body.default_pose()  # the subject as the user placed it
+        self.prior = prior if prior is not None else build_prior(self.body, self.settings.seed)
+        self.tracker = Tracker(self.body, self.capture, self.settings, prior=self.prior)
+        self.writer = ResultWriter(out_dir, self.body, self.settings, info={
+            "capture": str(Path(capture_dir).resolve()), "armature": armature_obj.name,
+            "cameras": [c.name for c in self.capture.cameras], "energy_scale": self.tracker.scale,
+            "preset": self.body.preset, "dof_names": self.body.dof_names})
+        self.frames = list(self.all_frames)
+        if resume:
+            done, state = self.writer.load_checkpoint()
+            if done:
+                self.tracker.restore(state)
+                self.tracker.estimates = list(done)
+                solved = {e.frame for e in done}
+                self.frames = [f for f in self.all_frames if f not in solved]
+                self.log(f"resuming after frame {done[-1].frame}: {len(done)} frames already solved")
+        self._cancel = threading.Event()
+
+    @property
+    def n_total(self):
+        return len(self.all_frames)
+
+    @property
+    def n_done(self):
+        return len(self.writer.estimates)
+
+    def cancel(self):
+        self._cancel.set()
+
+    @property
+    def cancelled(self):
+        return self._cancel.is_set()
+
+    def solve_next(self):
+        """Solve the next frame (engine only, no bpy). Returns its FrameEstimate, or None when done."""
+        if not self.frames or self.cancelled:
+            return None
+        frame = self.frames.pop(0)
+        if not self.writer.estimates:
+            est = self.tracker.initialise(frame, rough_pose=self.rough_pose)
+        else:
+            est = self.tracker.track(frame)
+        self.writer.add(est, self.tracker.state())
+        return est
+
+    def scene_frame(self, capture_frame):
+        return capture_frame + self.frame_offset
+
+    def key(self, estimate):
+        scene_bridge.key_pose(self.armature, self.body, estimate.pose, self.scene_frame(estimate.frame))
+
+    def key_all(self):
+        for est in self.writer.estimates:
+            self.key(est)
+
+    def finish(self, export=True, overlays=True, save_blend=True):
+        """Write the result folder's Blender-side files (main thread)."""
+        out = self.writer.out
+        written = {"joints": out / "joints.npz", "poses": out / "poses.npz", "report": out / "report.json"}
+        est = self.writer.estimates
+        if not est:
+            return written
+        frames = (self.scene_frame(est[0].frame), self.scene_frame(est[-1].frame))
+        self.scene.frame_start, self.scene.frame_end = frames
+        if export:
+            from .export import export_bvh, export_fbx
+
+            import bpy
+
+            export_bvh(bpy.context, self.armature, out / "animation.bvh", frames)
+            export_fbx(bpy.context, self.armature, out / "animation.fbx", frames)
+            written.update(bvh=out / "animation.bvh", fbx=out / "animation.fbx")
+        if save_blend:
+            import bpy
+
+            bpy.ops.wm.save_as_mainfile(filepath=str(out / "tracked.blend"), copy=True)
+            written["blend"] = out / "tracked.blend"
+        if overlays:
+            written["overlay"] = self.write_overlays()
+        return written
+
+    def write_overlays(self):
+        from ..core.overlay import OverlayWriter
+
+        proxy = self.tracker.proxy
+        writer = OverlayWriter(self.writer.out, self.capture.cameras, self.capture.frames.fps)
+        try:
+            for est in self.writer.estimates:
+                verts = proxy.deform(self.body, est.pose[None])[0]
+                writer.add(self.capture.frames.read(est.frame), verts, proxy.faces, proxy.face_part,
+                           len(proxy.part_names), label=f"frame {est.frame}  V={est.energy:.3f}")
+        finally:
+            writer.close()
+        return writer.folder
