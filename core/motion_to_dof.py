@@ -31,4 +31,6 @@ def dof_sequence_from_clip(body, clip, frames=None, name_map=None):
     world = sk.armature_matrix @ pose_arm
     heads = world[..., :3, 3]
     rots = world[..., :3, :3]
-    return fit_pose_sequence(body, heads, rots, driven_bone_indices(body))
+    # Orientations only settle the twists; weighted low because the clip moves bones (clavicles,
+    # hands) and axes (knee abduction) the 30-DOF body does not have.
+    return fit_pose_sequence(body, heads, rots, driven_bone_indices(body), rot_weight=0.03)

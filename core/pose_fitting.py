@@ -65,13 +65,13 @@ def initial_root(body, target_heads):
     return x
 
 
-def fit_pose_sequence(body, heads, rotations=None, rot_bones=(), x0=None, iterations=12):
+def fit_pose_sequence(body, heads, rotations=None, rot_bones=(), x0=None, iterations=12, rot_weight=0.1):
     """(F,B,3) world heads [+ (F,B,3,3) world bone rotations] -> (F,D) poses and per-frame RMS residual."""
     poses, errors = [], []
     x = initial_root(body, heads[0]) if x0 is None else np.asarray(x0, dtype=np.float64)
     for f in range(len(heads)):
         rots = None if rotations is None else rotations[f]
-        x, err = fit_pose(body, heads[f], x, rots, rot_bones, iterations=iterations)
+        x, err = fit_pose(body, heads[f], x, rots, rot_bones, rot_weight=rot_weight, iterations=iterations)
         poses.append(x)
         errors.append(err)
     return np.array(poses), np.array(errors)

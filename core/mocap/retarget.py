@@ -21,15 +21,16 @@ import numpy as np
 # target (MakeHuman "cmu_mb" rig) -> source joint, for the two CMU BVH namings.
 # 01_01.bvh uses the MotionBuilder-friendly names (same as the rig except the finger tips);
 # 131_01.bvh uses the older names. One row per target bone.
+# LHipJoint/RHipJoint are left out on purpose: they are rigid pelvis links whose rest directions
+# differ between the skeletons (sideways in MakeHuman, down-and-out in CMU); aligning them would
+# move the hip joints even in the rest pose. Unmapped, they follow Hips rigidly.
 CMU_NAME_TABLE = [
     # target            MotionBuilder-friendly   131_01-style
     ("Hips",             "Hips",            "Hips"),
-    ("LHipJoint",        "LHipJoint",       "LHipJoint"),
     ("LeftUpLeg",        "LeftUpLeg",       "LeftHip"),
     ("LeftLeg",          "LeftLeg",         "LeftKnee"),
     ("LeftFoot",         "LeftFoot",        "LeftAnkle"),
     ("LeftToeBase",      "LeftToeBase",     "LeftToe"),
-    ("RHipJoint",        "RHipJoint",       "RHipJoint"),
     ("RightUpLeg",       "RightUpLeg",      "RightHip"),
     ("RightLeg",         "RightLeg",        "RightKnee"),
     ("RightFoot",        "RightFoot",       "RightAnkle"),
@@ -55,6 +56,14 @@ CMU_NAME_TABLE = [
     ("RightHandFinger1", "RFingers",        "RFingers"),
     ("RThumb",           "RThumb",          "RThumb"),
 ]
+
+# Bones that stand in the same anatomical rest posture in both skeletons (an upright trunk, the
+# collar bones): they take the source's rotation away from ITS rest directly, without the rest
+# direction alignment A_b. Aligning them would tilt the trunk or lift the shoulders even in the
+# rest pose, because the joints sit at slightly different places in the two skeletons. A_b is for
+# the limbs, whose rest postures really differ (T-pose arms vs A-pose arms).
+UNALIGNED_BONES = frozenset({"Hips", "LowerBack", "Spine", "Spine1", "Neck", "Neck1", "Head",
+                             "LeftShoulder", "RightShoulder"})
 
 # BVH / ASF Y-up -> Blender Z-up
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -162,7 +171,7 @@ def _leg_height(points, up_axis, root_point):
 
 def retarget(clip, target_rest, target_parents, target_names, name_map=None, root_scale="legs",
              facing_pair=("LeftUpLeg", "RightUpLeg"), translation=(0.0, 0.0, 0.0), up_axis_change=True,
-             target_tails=None):
+             target_tails=None, unaligned=UNALIGNED_BONES):
     """Map `clip` onto the target armature. Returns a RetargetResult.
 
     target_rest: (B, 4, 4) Blender `bone.matrix_local` (armature space, metres);
@@ -174,7 +183,8 @@ def retarget(clip, target_rest, target_parents, target_names, name_map=None, roo
       used to turn the source so both face the same way;
     translation: added to the root position (target frame, metres);
     up_axis_change: apply C (Y-up -> Z-up); False when the source is already Z-up;
-    target_tails: (B, 3) bone tails, used with the heads to measure the target's leg height."""
+    target_tails: (B, 3) bone tails, used with the heads to measure the target's leg height;
+    unaligned: target bones that skip the rest-direction alignment (see UNALIGNED_BONES)."""
     target_rest = np.asarray(target_rest, dtype=np.float64)
     target_parents = np.asarray(target_parents, dtype=np.int64)
     B = len(target_names)
@@ -221,16 +231,20 @@ def retarget(clip, target_rest, target_parents, target_names, name_map=None, roo
     t_children = _children(target_parents)
     A = np.tile(np.eye(3), (B, 1, 1))
     for b, s in src_idx.items():
+        if target_names[b] in unaligned:
+            continue
         tail_dir = Rr[b][:, 1]
-        # target child continuing this bone: the mapped child whose head is nearest the tail
+        # target child continuing this bone: the mapped child whose head lies most nearly along the
+        # bone (children sharing the bone's head, like the CMU hip joints on Hips, rank last)
         toward = None
-        best = np.inf
-        tail = heads[b] + tail_dir * 1e-3
+        best = -np.inf
         for c in t_children[b]:
             if c in src_idx and _is_descendant(clip.parents, src_idx[c], s) and src_idx[c] != s:
-                d = np.linalg.norm(heads[c] - tail)
-                if d < best:
-                    best, toward = d, src_idx[c]
+                offset = heads[c] - heads[b]
+                length = np.linalg.norm(offset)
+                along = offset @ tail_dir / length if length > 1e-6 else -2.0
+                if along > best:
+                    best, toward = along, src_idx[c]
         saved = clip.end_sites
         clip.end_sites = end_sites_t        # so the end-site fallback is in target axes
         try:
