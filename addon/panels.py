@@ -1,0 +1,144 @@
+"""The sidebar tab "Mocap" of the 3D viewport: Capture, Subject, Track, Results / Export.
+
+Panels only show `scene.mocap` and call operators; every action lives in operators/.
+"""
+import textwrap
+
+import bpy
+
+from .properties import CAMERA_COLLECTION
+
+CATEGORY = "Mocap"
+
+
+def _wrapped(layout, text, context, icon="NONE", alert=False):
+    """Long messages (errors naming bones or files) as several labels: a sidebar label does not wrap."""
+    region = getattr(context, "region", None)
+    width = max(20, int((region.width if region else 300) / 7))
+    col = layout.column(align=True)
+    col.alert = alert
+    for i, line in enumerate(textwrap.wrap(text, width) or [""]):
+        col.label(text=line, icon=icon if i == 0 else "BLANK1")
+
+
+class _MocapPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = CATEGORY
+
+
+class MOCAP_PT_capture(_MocapPanel, bpy.types.Panel):
+    bl_idname = "MOCAP_PT_capture"
+    bl_label = "Capture"
+
+    def draw(self, context):
+        props = context.scene.mocap
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(props, "capture_dir", text="Folder")
+        layout.prop(props, "units")
+        layout.operator("mocap.import_capture", icon="IMPORT")
+        coll = bpy.data.collections.get(CAMERA_COLLECTION)
+        cameras = [o for o in coll.objects if o.type == "CAMERA"] if coll else []
+        if not cameras:
+            layout.label(text="No capture imported", icon="INFO")
+            return
+        render = context.scene.render
+        fps = render.fps / render.fps_base
+        box = layout.box()
+        box.label(text=f"{len(cameras)} cameras, {props.capture_frames} frames at {fps:g} fps", icon="CAMERA_DATA")
+        col = box.column(align=True)
+        for obj in cameras:
+            size = obj.get("mocap_resolution")
+            size_text = f"{int(size[0])}x{int(size[1])}" if size is not None else ""
+            active = context.scene.camera == obj
+            col.label(text=f"{obj.name}  {size_text}", icon="VIEW_CAMERA" if active else "OUTLINER_OB_CAMERA")
+
+
+class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
+    bl_idname = "MOCAP_PT_subject"
+    bl_label = "Subject"
+
+    def draw(self, context):
+        props = context.scene.mocap
+        layout = self.layout
+        layout.prop(props, "armature")
+        layout.operator("mocap.check_subject", icon="ARMATURE_DATA")
+        if not props.subject_checked:
+            return
+        box = layout.box()
+        if props.subject_dofs:
+            box.label(text=f"{props.subject_dofs} DOF, preset: {props.subject_preset}", icon="CHECKMARK")
+        if props.subject_problems:
+            _wrapped(box, props.subject_problems, context, icon="ERROR", alert=not props.subject_dofs)
+
+
+class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
+    bl_idname = "MOCAP_PT_track"
+    bl_label = "Track"
+
+    def draw(self, context):
+        props = context.scene.mocap
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = layout.column()
+        settings.enabled = not props.is_tracking
+        settings.prop(props, "algorithm")
+        settings.prop(props, "likelihood")
+        col = settings.column(align=True)
+        col.prop(props, "particles")
+        col.prop(props, "iterations")
+        settings.prop(props, "seed")
+        settings.prop(props, "backend")
+        settings.prop(props, "use_frame_range")
+        rng = settings.column(align=True)
+        rng.enabled = props.use_frame_range
+        rng.prop(props, "frame_start")
+        rng.prop(props, "frame_end")
+        settings.prop(props, "output_dir", text="Output")
+        settings.prop(props, "resume")
+        row = layout.row()
+        row.scale_y = 1.5
+        row.enabled = not props.is_tracking
+        row.operator("mocap.track", icon="PLAY")
+        if props.is_tracking or props.frames_solved:
+            layout.progress(factor=props.progress, type="BAR",
+                            text=f"{props.frames_solved}/{props.frames_total} frames")
+        if props.status:
+            _wrapped(layout, props.status, context)
+        if props.is_tracking:
+            layout.label(text="Esc to cancel (keys made so far are kept)", icon="CANCEL")
+        if props.last_error:
+            _wrapped(layout, props.last_error, context, icon="ERROR", alert=True)
+
+
+class MOCAP_PT_results(_MocapPanel, bpy.types.Panel):
+    bl_idname = "MOCAP_PT_results"
+    bl_label = "Results / Export"
+
+    def draw(self, context):
+        props = context.scene.mocap
+        layout = self.layout
+        if props.frames_solved:
+            layout.label(text=f"{props.frames_solved} frames, {props.seconds_per_frame:.1f} s/frame", icon="TIME")
+        if props.last_output:
+            layout.prop(props, "last_output", text="Folder")
+        row = layout.row(align=True)
+        row.enabled = not props.is_tracking
+        row.operator("mocap.export_fbx", icon="EXPORT")
+        row.operator("mocap.export_bvh", icon="EXPORT")
+
+
+classes = (MOCAP_PT_capture, MOCAP_PT_subject, MOCAP_PT_track, MOCAP_PT_results)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

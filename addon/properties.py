@@ -1,0 +1,124 @@
+"""Scene settings of the add-on (`scene.mocap`): capture, subject, tracker settings, run state, results.
+
+Plain data only. The operators read these, call the engine, and write the outcome back here so
+the panels can show it. `tracking_settings()` is the one translation into the engine's settings.
+"""
+import bpy
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+                       StringProperty)
+
+ALGORITHMS = (
+    ("isa", "ISA", "Interacting simulated annealing: global optimisation with a particle set (the paper's best, default)"),
+    ("apf", "APF", "Annealed particle filter: layered annealing of a particle set"),
+    ("pf", "PF", "Particle filter: one weighting step over many particles (weakest, for comparison)"),
+    ("fsa", "FSA", "Fast simulated annealing: one hypothesis with Cauchy moves"),
+    ("icp", "ICP", "Local refinement against silhouette contours: fast, loses fast motion"),
+)
+
+LIKELIHOODS = (
+    ("silh+edge", "Silhouette + edges", "Binary silhouette overlap and image edges (default)"),
+    ("silh+edgech", "Silhouette + chamfer edges", "Binary silhouette overlap and distance to image edges"),
+    ("silhch+color", "Chamfer silhouette + colour", "Chamfer silhouette distance and per-part colour "
+                                                    "histograms (slowest, best on clothes with distinct colours)"),
+    ("silh", "Silhouette", "Binary silhouette overlap only"),
+    ("silhch", "Chamfer silhouette", "Chamfer silhouette distance only"),
+)
+
+BACKENDS = (
+    ("auto", "Auto", "Use the fast compiled path when it works on this machine, NumPy otherwise"),
+    ("numpy", "NumPy", "Reference implementation: slow, always available"),
+    ("fast", "Fast", "Compiled CPU rasteriser (numba)"),
+)
+
+UNITS = (
+    ("auto", "Auto", "Use the unit written in the calibration file (metres when it says nothing)"),
+    ("m", "Metres", "The calibration's translations are in metres"),
+    ("cm", "Centimetres", "The calibration's translations are in centimetres"),
+    ("mm", "Millimetres", "The calibration's translations are in millimetres"),
+)
+
+CAMERA_COLLECTION = "Mocap Cameras"
+
+
+def _is_armature(_self, obj):
+    return obj.type == "ARMATURE"
+
+
+class MocapSettings(bpy.types.PropertyGroup):
+    # ---- capture
+    capture_dir: StringProperty(
+        name="Capture Folder", subtype="DIR_PATH",
+        description="Folder with calibration.toml (or intri.yml + extri.yml) and videos/<camera>.mp4")
+    units: EnumProperty(name="Units", items=UNITS, default="auto",
+                        description="Length unit of the calibration when the file does not state it")
+    camera_count: IntProperty(name="Cameras", default=0, min=0, description="Cameras imported from the capture")
+    capture_frames: IntProperty(name="Capture Frames", default=0, min=0, description="Frames in the imported capture")
+
+    # ---- subject
+    armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature,
+                              description="The rigged character to track (a mesh must be skinned to it)")
+    subject_checked: BoolProperty(name="Checked", default=False, description="The rig check has run")
+    subject_dofs: IntProperty(name="DOF", default=0, description="Degrees of freedom the tracker will solve")
+    subject_preset: StringProperty(name="Preset", description="Rig naming the bones were matched with")
+    subject_problems: StringProperty(name="Problems", description="What stops the rig from being tracked")
+
+    # ---- tracker
+    algorithm: EnumProperty(name="Algorithm", items=ALGORITHMS, default="isa")
+    likelihood: EnumProperty(name="Likelihood", items=LIKELIHOODS, default="silh+edge",
+                             description="Image cues the pose is scored against")
+    particles: IntProperty(name="Particles", default=200, min=1, soft_max=2000,
+                           description="Pose hypotheses per iteration (the budget per frame is particles x iterations)")
+    iterations: IntProperty(name="Iterations", default=15, min=1, soft_max=100,
+                            description="Annealing iterations / layers per frame")
+    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: the same seed repeats the same result")
+    backend: EnumProperty(name="Backend", items=BACKENDS, default="auto",
+                          description="How poses are rendered and compared with the images")
+    use_frame_range: BoolProperty(name="Limit Frames", default=False,
+                                  description="Track only a range of capture frames (otherwise all of them)")
+    frame_start: IntProperty(name="First", default=0, min=0, description="First capture frame to track (0-based)")
+    frame_end: IntProperty(name="Last", default=0, min=0, description="Last capture frame to track (inclusive)")
+    output_dir: StringProperty(
+        name="Output Folder", subtype="DIR_PATH",
+        description="Where joints, poses, BVH/FBX, the report and overlays are written")
+    resume: BoolProperty(name="Resume", default=False,
+                         description="Continue a run whose results are already in the output folder")
+
+    # ---- run state (written by the Track operator)
+    is_tracking: BoolProperty(name="Tracking", default=False)
+    progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR")
+    status: StringProperty(name="Status")
+    last_error: StringProperty(name="Last Error")
+    frames_solved: IntProperty(name="Frames Solved", default=0)
+    frames_total: IntProperty(name="Frames To Solve", default=0)
+    seconds_per_frame: FloatProperty(name="Seconds per Frame", default=0.0, precision=2)
+    last_output: StringProperty(name="Last Output", subtype="DIR_PATH", description="Result folder of the last run")
+
+    def frame_range(self):
+        """Capture frames to track as a range, or None for the whole capture."""
+        if not self.use_frame_range:
+            return None
+        if self.frame_end < self.frame_start:
+            raise ValueError(f"the last frame ({self.frame_end}) is before the first ({self.frame_start}); "
+                             f"fix the frame range in the Track panel")
+        return range(self.frame_start, self.frame_end + 1)
+
+    def tracking_settings(self):
+        from ..core.tracking import TrackingSettings
+
+        return TrackingSettings(algorithm=self.algorithm, likelihood=self.likelihood, particles=self.particles,
+                                iterations=self.iterations, seed=self.seed, backend=self.backend)
+
+
+classes = (MocapSettings,)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.mocap = PointerProperty(type=MocapSettings)
+
+
+def unregister():
+    del bpy.types.Scene.mocap
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,185 @@
+"""FBX / BVH export of the tracked armature with settings that keep every tracked frame.
+
+`export_fbx` / `export_bvh` are plain functions (the CLI and the Track session use them too); the
+operators only add a file browser. Settings follow blender-and-calibration.md 4.6: no leaf bones,
+no curve simplification, start/end keys forced, Blender's bone axes, FBX unit scaling.
+"""
+import os
+import traceback
+from contextlib import contextmanager
+from pathlib import Path
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper
+
+from ..addon.anim_compat import keyed_frame_range
+
+
+class ExportError(ValueError):
+    """Nothing exportable (no keys, no armature) or a frame range that makes no sense."""
+
+
+def skinned_meshes(armature_obj, scene):
+    return [o for o in scene.objects if o.type == "MESH" and any(
+        m.type == "ARMATURE" and m.object == armature_obj for m in o.modifiers)]
+
+
+def _resolve_range(armature_obj, frame_range):
+    if frame_range is None:
+        frame_range = keyed_frame_range(armature_obj)
+        if frame_range is None:
+            raise ExportError(f"armature {armature_obj.name!r} has no keyframes to export: track it first "
+                              f"(Mocap > Track), or give a frame range")
+    start, end = (int(f) for f in frame_range)
+    if end < start:
+        raise ExportError(f"export frame range {start}-{end} ends before it starts; swap the two frames")
+    return start, end
+
+
+@contextmanager
+def _export_state(context, objects, active, frame_range):
+    """Object mode, only `objects` selected, `active` active, scene range = frame_range; restored after."""
+    scene, view_layer = context.scene, context.view_layer
+    previous_mode = None
+    if context.mode != "OBJECT" and view_layer.objects.active is not None:
+        previous_mode = view_layer.objects.active.mode
+        bpy.ops.object.mode_set(mode="OBJECT")
+    selected = [o for o in view_layer.objects if o.select_get()]
+    previous_active = view_layer.objects.active
+    previous_range = (scene.frame_start, scene.frame_end, scene.frame_current)
+    try:
+        for o in selected:
+            o.select_set(False)
+        for o in objects:
+            if o.name not in view_layer.objects:
+                raise ExportError(f"{o.name!r} is not in the view layer {view_layer.name!r}; "
+                                  f"include its collection to export it")
+            o.select_set(True)
+        view_layer.objects.active = active
+        scene.frame_start, scene.frame_end = frame_range
+        yield
+    finally:
+        scene.frame_start, scene.frame_end = previous_range[:2]
+        scene.frame_set(previous_range[2])
+        for o in view_layer.objects:
+            o.select_set(o in selected)
+        view_layer.objects.active = previous_active
+        if previous_mode is not None and previous_active is not None:
+            bpy.ops.object.mode_set(mode=previous_mode)
+
+
+def _prepare_path(path):
+    path = Path(bpy.path.abspath(str(path)))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def export_fbx(context, armature_obj, path, frame_range=None, include_mesh=True,
+               scale_options="FBX_SCALE_UNITS", global_scale=1.0):
+    """Write the armature (and the meshes skinned to it) with its animation baked on every frame."""
+    start, end = _resolve_range(armature_obj, frame_range)
+    path = _prepare_path(path)
+    objects = [armature_obj] + (skinned_meshes(armature_obj, context.scene) if include_mesh else [])
+    with _export_state(context, objects, armature_obj, (start, end)):
+        bpy.ops.export_scene.fbx(
+            filepath=str(path), use_selection=True, object_types={"ARMATURE", "MESH"},
+            global_scale=global_scale, apply_unit_scale=True, apply_scale_options=scale_options,
+            axis_forward="-Z", axis_up="Y", primary_bone_axis="Y", secondary_bone_axis="X",
+            armature_nodetype="NULL", add_leaf_bones=False, use_armature_deform_only=False,
+            bake_anim=True, bake_anim_use_all_bones=True, bake_anim_use_nla_strips=False,
+            bake_anim_use_all_actions=False, bake_anim_force_startend_keying=True,
+            bake_anim_step=1.0, bake_anim_simplify_factor=0.0)
+    return path
+
+
+def export_bvh(context, armature_obj, path, frame_range=None, global_scale=1.0):
+    """Write the armature's animation as BVH (Blender axes: Z up; BVH has no axis option)."""
+    start, end = _resolve_range(armature_obj, frame_range)
+    path = _prepare_path(path)
+    with _export_state(context, [armature_obj], armature_obj, (start, end)):
+        bpy.ops.export_anim.bvh(filepath=str(path), frame_start=start, frame_end=end, global_scale=global_scale,
+                                rotate_mode="NATIVE", root_transform_only=False)
+    return path
+
+
+def _default_export_path(context, armature_obj, ext):
+    props = context.scene.mocap
+    folder = props.last_output or (os.path.dirname(bpy.data.filepath) if bpy.data.filepath else "")
+    name = f"{bpy.path.clean_name(armature_obj.name)}_mocap{ext}"
+    return os.path.join(bpy.path.abspath(folder), name) if folder else name
+
+
+class _ExportOperator(ExportHelper):
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and not context.scene.mocap.is_tracking
+
+    def invoke(self, context, event):
+        from .setup_subject import subject_armature
+
+        try:
+            arm = subject_armature(context)
+        except ValueError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        if not self.filepath:
+            self.filepath = _default_export_path(context, arm, self.filename_ext)
+        return ExportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        from .setup_subject import subject_armature
+
+        try:
+            arm = subject_armature(context)
+            path = self._export(context, arm)
+        except (ValueError, OSError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except Exception as exc:
+            traceback.print_exc()
+            self.report({"ERROR"}, f"Export failed unexpectedly ({type(exc).__name__}: {exc}); "
+                                   f"see the system console")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Exported {arm.name} to {path}")
+        return {"FINISHED"}
+
+
+class MOCAP_OT_export_fbx(bpy.types.Operator, _ExportOperator):
+    """Export the tracked armature and its mesh as FBX, every frame keyed, no leaf bones"""
+
+    bl_idname = "mocap.export_fbx"
+    bl_label = "Export FBX"
+    filename_ext = ".fbx"
+    filter_glob: StringProperty(default="*.fbx", options={"HIDDEN"})
+    include_mesh: BoolProperty(name="Include Mesh", default=True, description="Export the skinned mesh too")
+    scale_options: EnumProperty(
+        name="Apply Scalings", default="FBX_SCALE_UNITS",
+        items=(("FBX_SCALE_NONE", "All Local", "Keep Blender's scale on the objects (1 unit = 1 cm in FBX apps)"),
+               ("FBX_SCALE_UNITS", "FBX Units Scale", "Scale to FBX centimetres (Unreal, Unity import at the "
+                                                      "right size)"),
+               ("FBX_SCALE_CUSTOM", "FBX Custom Scale", "Apply the custom scale to the FBX unit scale"),
+               ("FBX_SCALE_ALL", "FBX All", "Apply both unit and custom scale to the FBX unit scale")))
+
+    def _export(self, context, arm):
+        return export_fbx(context, arm, self.filepath, include_mesh=self.include_mesh,
+                          scale_options=self.scale_options)
+
+
+class MOCAP_OT_export_bvh(bpy.types.Operator, _ExportOperator):
+    """Export the tracked armature's animation as BVH (the keyed frame range)"""
+
+    bl_idname = "mocap.export_bvh"
+    bl_label = "Export BVH"
+    filename_ext = ".bvh"
+    filter_glob: StringProperty(default="*.bvh", options={"HIDDEN"})
+    global_scale: FloatProperty(name="Scale", default=1.0, min=0.0001, max=1e6,
+                                description="Scale applied to positions (e.g. 100 for centimetres)")
+
+    def _export(self, context, arm):
+        return export_bvh(context, arm, self.filepath, global_scale=self.global_scale)
+
+
+classes = (MOCAP_OT_export_fbx, MOCAP_OT_export_bvh)

@@ -1,0 +1,72 @@
+"""Check that the chosen armature can be tracked: DOF count, rig preset, and what stops it if not."""
+import traceback
+
+import bpy
+
+
+def subject_armature(context):
+    """The armature picked in the Subject panel, else the scene's only armature (SubjectError otherwise)."""
+    from ..addon.scene_bridge import find_armature
+
+    picked = context.scene.mocap.armature
+    if picked is not None:
+        if picked.name not in context.scene.objects:
+            from ..addon.scene_bridge import SubjectError
+
+            raise SubjectError(f"armature {picked.name!r} is not in scene {context.scene.name!r}; "
+                               f"pick one of this scene's armatures in the Subject panel")
+        return picked
+    return find_armature(context.scene)
+
+
+def check_subject(context):
+    """Build the engine's body from the subject; return a summary dict (raises ValueError on problems)."""
+    from ..addon.scene_bridge import body_from_blender, find_skinned_mesh
+
+    arm = subject_armature(context)
+    mesh = find_skinned_mesh(arm, context.scene)
+    body = body_from_blender(arm, mesh, context.scene)
+    unweighted = int(body.unweighted.sum())
+    problems = []
+    if unweighted:
+        problems.append(f"{unweighted} of {len(body.vertices)} vertices of {mesh.name!r} follow no deforming bone "
+                        f"(they will not move): weight-paint them")
+    return {"armature": arm.name, "mesh": mesh.name, "dofs": body.n_dof, "preset": body.preset or "custom",
+            "bones": body.skeleton.n_bones, "vertices": len(body.vertices), "triangles": len(body.faces),
+            "problems": problems}
+
+
+class MOCAP_OT_check_subject(bpy.types.Operator):
+    """Check that the armature and its skinned mesh can be tracked (bone mapping, weights, DOF)"""
+
+    bl_idname = "mocap.check_subject"
+    bl_label = "Check Rig"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        props = context.scene.mocap
+        props.subject_checked = True
+        try:
+            info = check_subject(context)
+        except ValueError as exc:  # SubjectError, RigMappingError: the message names the bones / the fix
+            props.subject_dofs, props.subject_preset, props.subject_problems = 0, "", str(exc)
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except Exception as exc:
+            traceback.print_exc()
+            props.subject_dofs, props.subject_preset = 0, ""
+            props.subject_problems = f"unexpected {type(exc).__name__}: {exc}"
+            self.report({"ERROR"}, f"Rig check failed unexpectedly ({type(exc).__name__}: {exc}); "
+                                   f"see the system console and report it")
+            return {"CANCELLED"}
+        props.subject_dofs = info["dofs"]
+        props.subject_preset = info["preset"]
+        props.subject_problems = "; ".join(info["problems"])
+        level = {"WARNING"} if info["problems"] else {"INFO"}
+        self.report(level, f"{info['armature']}: {info['dofs']} DOF, preset {info['preset']}, "
+                           f"mesh {info['mesh']} ({info['triangles']} triangles)"
+                           + (f"; {props.subject_problems}" if info["problems"] else ""))
+        return {"FINISHED"}
+
+
+classes = (MOCAP_OT_check_subject,)

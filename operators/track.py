@@ -1,0 +1,350 @@
+"""Track: solve the subject's pose frame by frame and key it on the armature as each frame is solved.
+
+The engine work (`TrackSession.solve_next`) runs in a worker thread; it never touches bpy. Estimates
+come back through a queue that a 0.1 s window-manager timer drains on the main thread, where they are
+keyed (`TrackSession.key`) and the panel's progress is updated. Esc / right-click asks the session to
+stop after the current frame; the keys already made stay and `finish()` writes what was solved.
+Without an event loop (background mode, tests) `execute` runs the same steps synchronously.
+"""
+import queue
+import threading
+import time
+import traceback
+from pathlib import Path
+
+import bpy
+
+# The real class lives in track_session.py, which pulls in the whole engine: it is imported on first
+# use so that enabling the add-on stays fast. Tests replace this name with a fake session.
+TrackSession = None
+
+
+def _session_class():
+    global TrackSession
+    if TrackSession is None:
+        from .track_session import TrackSession as session_cls
+
+        TrackSession = session_cls
+    return TrackSession
+
+
+class TrackSetupError(ValueError):
+    """The Track panel is missing something the run needs."""
+
+
+def output_folder(context):
+    """The scene's output folder, else the preference, else 'mocap_result' next to the saved .blend."""
+    from ..addon.preferences import get_preferences
+
+    folder = context.scene.mocap.output_dir
+    if not folder:
+        prefs = get_preferences(context)
+        folder = prefs.default_output_dir if prefs is not None else ""
+    if not folder:
+        if not bpy.data.filepath:
+            raise TrackSetupError("No output folder: set one in Mocap > Track (or save the .blend file, then "
+                                  "results go to a 'mocap_result' folder next to it)")
+        folder = "//mocap_result"
+    return Path(bpy.path.abspath(folder))
+
+
+def build_session(context, progress=None):
+    """Read the scene's settings and construct the tracking session (main thread)."""
+    from ..addon.preferences import effective_backend
+    from .setup_subject import subject_armature
+
+    props = context.scene.mocap
+    if not props.capture_dir:
+        raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
+    armature = subject_armature(context)
+    settings = props.tracking_settings()
+    settings.backend = effective_backend(context, props.backend)
+    capture_dir = Path(bpy.path.abspath(props.capture_dir))
+    return _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
+                            frames=props.frame_range(), resume=props.resume, progress=progress)
+
+
+class TrackJob:
+    """One run of a session: solving in a worker thread (or inline), keying on the caller's thread.
+
+    Thread rule: the worker calls only `session.solve_next()` and puts plain results on the queue;
+    everything else (keys, properties, finish) happens where `drain` / `run_inline` / `finish` are called.
+    """
+
+    def __init__(self):
+        self.session = None
+        self.queue = queue.Queue()
+        self.thread = None
+        self.estimates = []
+        self.error = None  # text naming what failed, or None
+        self.cancelled = False
+        self.done = False
+        self.status = ""
+        self.out_dir = None
+        self.started = time.perf_counter()
+        self._done_before = 0
+        self._total = 0
+
+    # ---- progress relay: the session may call this from any thread
+    def report_progress(self, *args, **_kwargs):
+        self.queue.put(("status", " ".join(str(a) for a in args)))
+
+    def _attach(self, session):
+        self.session = session
+        self._total = int(getattr(session, "n_total", 0) or len(session.frames))
+        self._done_before = max(0, self._total - len(session.frames))
+        self.started = time.perf_counter()
+
+    @property
+    def fraction(self):
+        if self._total <= 0:
+            return 1.0 if self.done else 0.0
+        return min(1.0, (self._done_before + len(self.estimates)) / self._total)
+
+    @property
+    def seconds_per_frame(self):
+        return sum(e.seconds for e in self.estimates) / len(self.estimates) if self.estimates else 0.0
+
+    # ---- threaded run
+    def start(self, session):
+        self._attach(session)
+        self.thread = threading.Thread(target=self._work, name="mocap-track", daemon=True)
+        self.thread.start()
+
+    def _work(self):
+        try:
+            while not self.cancelled:
+                estimate = self.session.solve_next()
+                if estimate is None:
+                    break
+                self.queue.put(("frame", estimate))
+        except Exception as exc:  # reported on the main thread, never swallowed
+            self.queue.put(("error", f"{type(exc).__name__}: {exc}", traceback.format_exc()))
+        finally:
+            self.queue.put(("done", None))
+
+    def drain(self):
+        """Main thread: key every estimate that arrived; return them. Sets `done` when the worker ended."""
+        new = []
+        while True:
+            try:
+                message = self.queue.get_nowait()
+            except queue.Empty:
+                return new
+            kind = message[0]
+            if kind == "frame":
+                if self._key(message[1]):
+                    new.append(message[1])
+            elif kind == "status":
+                self.status = message[1]
+            elif kind == "error":
+                self._fail(message[1], message[2])
+            elif kind == "done":
+                self.done = True
+
+    def _key(self, estimate):
+        if self.error is not None:
+            return False
+        try:
+            self.session.key(estimate)
+        except Exception as exc:  # e.g. the armature was deleted while tracking
+            self._fail(f"keying frame {estimate.frame} failed: {type(exc).__name__}: {exc}", traceback.format_exc())
+            self.request_cancel()
+            return False
+        self.estimates.append(estimate)
+        return True
+
+    def _fail(self, message, details):
+        print(details)
+        if self.error is None:
+            self.error = message
+
+    def request_cancel(self):
+        if not self.cancelled:
+            self.cancelled = True
+            self.session.cancel()
+
+    # ---- synchronous run (no event loop)
+    def run_inline(self, session, on_frame=None):
+        self._attach(session)
+        try:
+            while not self.cancelled:
+                estimate = session.solve_next()
+                if estimate is None:
+                    break
+                if self._key(estimate) and on_frame is not None:
+                    on_frame(estimate)
+        except Exception as exc:
+            self._fail(f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        self.drain()  # status messages
+        self.done = True
+
+    def finish(self, export=True):
+        """Wait for the worker, key what is left, write the results. Returns the session's summary."""
+        if self.thread is not None:
+            self.thread.join()
+            self.drain()
+        self.done = True
+        return self.session.finish(export=export)
+
+
+def _status_line(job, props):
+    text = f"Tracking frame {job._done_before + len(job.estimates)}/{job._total}"
+    if job.estimates:
+        text += f", {job.seconds_per_frame:.1f} s/frame, energy {job.estimates[-1].energy:.3g}"
+    if job.status:
+        text += f" - {job.status}"
+    return text
+
+
+class MOCAP_OT_track(bpy.types.Operator):
+    """Track the subject through the capture, keying each frame as it is solved (Esc to cancel)"""
+
+    bl_idname = "mocap.track"
+    bl_label = "Track"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and not context.scene.mocap.is_tracking
+
+    # ---- shared
+    def _begin(self, context):
+        job = TrackJob()
+        props = context.scene.mocap
+        props.last_error = ""
+        try:
+            session = build_session(context, progress=job.report_progress)
+        except (ValueError, OSError) as exc:
+            props.last_error = str(exc)
+            self.report({"ERROR"}, str(exc))
+            return None, None
+        except Exception as exc:
+            traceback.print_exc()
+            props.last_error = f"{type(exc).__name__}: {exc}"
+            self.report({"ERROR"}, f"Could not start tracking ({type(exc).__name__}: {exc}); see the system console")
+            return None, None
+        job.out_dir = output_folder(context)
+        props.is_tracking = True
+        props.progress = 0.0
+        props.frames_solved = 0
+        props.frames_total = job._total or len(session.frames)
+        props.seconds_per_frame = 0.0
+        props.status = "Starting"
+        return job, session
+
+    def _show(self, context, job):
+        props = context.scene.mocap
+        props.progress = job.fraction
+        props.frames_solved = len(job.estimates)
+        props.frames_total = job._total
+        props.seconds_per_frame = job.seconds_per_frame
+        props.status = "Cancelling after the current frame" if job.cancelled and not job.done else _status_line(job, props)
+
+    def _end(self, context, job):
+        props = context.scene.mocap
+        summary = None
+        try:
+            summary = job.finish()
+        except Exception as exc:
+            traceback.print_exc()
+            job._fail(f"writing the results failed: {type(exc).__name__}: {exc}", "")
+        self._show(context, job)
+        props.is_tracking = False
+        if summary is not None:
+            props.last_output = str(job.out_dir)
+        solved = len(job.estimates)
+        if job.error:
+            props.last_error = job.error
+            props.status = f"Stopped after {solved} frames: {job.error}"
+            self.report({"ERROR"}, f"Tracking stopped after {solved} frames: {job.error}")
+            return {"CANCELLED"}
+        if job.cancelled:
+            props.status = f"Cancelled after {solved} frames (keys kept)"
+            self.report({"WARNING"}, f"Tracking cancelled after {solved} frames; their keys are kept")
+            return {"CANCELLED"}
+        props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame"
+        self.report({"INFO"}, f"Tracked {solved} frames; results in {props.last_output}")
+        return {"FINISHED"}
+
+    # ---- synchronous: background mode, scripts, tests
+    def execute(self, context):
+        job, session = self._begin(context)
+        if job is None:
+            return {"CANCELLED"}
+        interactive = not bpy.app.background
+
+        def on_frame(estimate):
+            self._show(context, job)
+            print(f"mocap: frame {estimate.frame} solved in {estimate.seconds:.2f} s "
+                  f"({len(job.estimates)}/{job._total - job._done_before}), energy {estimate.energy:.4g}")
+            if interactive:
+                context.window_manager.progress_update(int(100 * job.fraction))
+
+        if interactive:
+            context.window_manager.progress_begin(0, 100)
+        try:
+            job.run_inline(session, on_frame)
+        finally:
+            if interactive:
+                context.window_manager.progress_end()
+        return self._end(context, job)
+
+    # ---- modal: the UI stays responsive while the worker solves
+    def invoke(self, context, _event):
+        if context.window is None:
+            return self.execute(context)
+        job, session = self._begin(context)
+        if job is None:
+            return {"CANCELLED"}
+        self._job = job
+        job.start(session)
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
+            job.request_cancel()
+            self._refresh(context, job)
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        new = job.drain()
+        if new:
+            context.scene.frame_set(new[-1].frame + context.scene.frame_start)
+        if job.error and not job.cancelled:
+            job.request_cancel()
+        self._refresh(context, job)
+        if job.done:
+            self._cleanup(context)
+            return self._end(context, job)
+        return {"RUNNING_MODAL"}
+
+    def _refresh(self, context, job):
+        self._show(context, job)
+        if context.workspace is not None:
+            context.workspace.status_text_set(f"{context.scene.mocap.status}  (Esc to cancel)")
+        for area in (context.screen.areas if context.screen else ()):
+            if area.type in {"VIEW_3D", "PROPERTIES"}:
+                area.tag_redraw()
+
+    def _cleanup(self, context):
+        context.window_manager.event_timer_remove(self._timer)
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+
+    def cancel(self, context):
+        """Blender ends the operator (file loaded, window closed): stop the worker, keep the keys."""
+        job = self._job
+        job.request_cancel()
+        if job.thread is not None:
+            job.thread.join()
+        job.drain()
+        self._cleanup(context)
+        context.scene.mocap.is_tracking = False
+
+
+classes = (MOCAP_OT_track,)
