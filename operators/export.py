@@ -93,6 +93,17 @@ def export_fbx(context, armature_obj, path, frame_range=None, include_mesh=True,
     return path
 
 
+def bvh_transform_warning(armature_obj):
+    """A message when the armature object is moved/rotated/scaled: BVH files hold armature space only."""
+    import numpy as np
+
+    if np.allclose(np.array(armature_obj.matrix_world), np.eye(4), atol=1e-6):
+        return ""
+    return (f"armature {armature_obj.name!r} has an object transform that is not part of the BVH (Blender's BVH "
+            f"exporter writes armature space); apply it (Ctrl+A > All Transforms) before tracking if the BVH must "
+            f"match the world")
+
+
 def export_bvh(context, armature_obj, path, frame_range=None, global_scale=1.0):
     """Write the armature's animation as BVH (Blender axes: Z up; BVH has no axis option)."""
     start, end = _resolve_range(armature_obj, frame_range)
@@ -143,8 +154,13 @@ class _ExportOperator(ExportHelper):
             self.report({"ERROR"}, f"Export failed unexpectedly ({type(exc).__name__}: {exc}); "
                                    f"see the system console")
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Exported {arm.name} to {path}")
+        warning = self._warning(arm)
+        self.report({"WARNING"} if warning else {"INFO"}, f"Exported {arm.name} to {path}"
+                    + (f"; {warning}" if warning else ""))
         return {"FINISHED"}
+
+    def _warning(self, _arm):
+        return ""
 
 
 class MOCAP_OT_export_fbx(bpy.types.Operator, _ExportOperator):
@@ -177,6 +193,9 @@ class MOCAP_OT_export_bvh(bpy.types.Operator, _ExportOperator):
     filter_glob: StringProperty(default="*.bvh", options={"HIDDEN"})
     global_scale: FloatProperty(name="Scale", default=1.0, min=0.0001, max=1e6,
                                 description="Scale applied to positions (e.g. 100 for centimetres)")
+
+    def _warning(self, arm):
+        return bvh_transform_warning(arm)
 
     def _export(self, context, arm):
         return export_bvh(context, arm, self.filepath, global_scale=self.global_scale)
