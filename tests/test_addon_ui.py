@@ -1,0 +1,357 @@
+"""The Blender side: registration, the Mocap sidebar panels, Check Rig, and the Track operator's run loop.
+
+The Track operator is driven here by a fake session (same interface as operators/track_session.py)
+so that its own duties are checked: keys are made on the main thread for every solved frame, the
+settings reach the session, `finish()` always runs, cancel keeps the solved frames, and errors in the
+worker are reported instead of swallowed.
+"""
+import importlib
+import sys
+import threading
+import time
+from collections import namedtuple
+
+import numpy as np
+import pytest
+
+from rig_helpers import build_armature
+
+pytestmark = pytest.mark.bpy
+
+PANELS = ("MOCAP_PT_capture", "MOCAP_PT_subject", "MOCAP_PT_track", "MOCAP_PT_results")
+OPERATOR_MODULES = ("import_capture", "setup_subject", "track", "export")
+
+
+def _module(addon_module_name, name):
+    return importlib.import_module(f"{addon_module_name}.{name}")
+
+
+def _operator_classes(addon_module_name):
+    return [cls for name in OPERATOR_MODULES for cls in _module(addon_module_name, f"operators.{name}").classes]
+
+
+# ----------------------------------------------------------------------------- registration
+def test_addon_registers_panels_operators_properties_and_cli(addon_module_name, bpy_module):
+    bpy = bpy_module
+    for name in PANELS:
+        panel = getattr(bpy.types, name)
+        assert (panel.bl_space_type, panel.bl_region_type, panel.bl_category) == ("VIEW_3D", "UI", "Mocap")
+    classes = _operator_classes(addon_module_name)
+    assert {c.__name__ for c in classes} >= {"MOCAP_OT_import_capture", "MOCAP_OT_check_subject", "MOCAP_OT_track",
+                                             "MOCAP_OT_export_fbx", "MOCAP_OT_export_bvh"}
+    for cls in classes:
+        assert cls.__name__.startswith("MOCAP_OT_") and cls.bl_idname.startswith("mocap.")
+        op = getattr(bpy.ops.mocap, cls.bl_idname.split(".", 1)[1])
+        assert op.poll() is True, cls.bl_idname
+    props = bpy.context.scene.mocap
+    assert (props.algorithm, props.likelihood, props.particles, props.iterations, props.backend) == (
+        "isa", "silh+edge", 200, 15, "auto")
+    prefs = bpy.context.preferences.addons[addon_module_name].preferences
+    assert type(prefs).bl_idname == addon_module_name and prefs.default_backend == "auto"
+    ops_pkg = _module(addon_module_name, "operators")
+    assert ops_pkg._cli_handle is not None
+
+
+def test_disable_removes_everything_and_enable_restores_it(addon_module_name, bpy_module):
+    import addon_utils
+
+    bpy = bpy_module
+    addon_utils.disable(addon_module_name)
+    try:
+        for name in PANELS:
+            assert not hasattr(bpy.types, name)
+        assert not hasattr(bpy.types.Scene, "mocap")
+        with pytest.raises(AttributeError, match="could not be found"):
+            bpy.ops.mocap.track.poll()
+        addon = bpy.context.preferences.addons.get(addon_module_name)
+        assert addon is None or addon.preferences is None
+        assert sys.modules[f"{addon_module_name}.operators"]._cli_handle is None
+    finally:
+        addon_utils.enable(addon_module_name, default_set=True, handle_error=None)
+    assert hasattr(bpy.types, "MOCAP_PT_track") and bpy.ops.mocap.track.poll()
+    assert _module(addon_module_name, "operators")._cli_handle is not None
+
+
+# ----------------------------------------------------------------------------- panels
+class _FakeLayout:
+    """Stands in for UILayout in background mode and checks what the panels ask it to draw."""
+
+    _icons = None
+
+    def __init__(self, log):
+        self.log = log
+
+    def _sub(self, *_args, **_kwargs):
+        return _FakeLayout(self.log)
+
+    row = column = box = split = _sub
+
+    def _check_icon(self, icon):
+        import bpy
+
+        if _FakeLayout._icons is None:
+            _FakeLayout._icons = {i.identifier for i in
+                                  bpy.types.UILayout.bl_rna.functions["label"].parameters["icon"].enum_items}
+        assert icon in _FakeLayout._icons, f"unknown icon {icon}"
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
+        self.log.append(("prop", name))
+
+    def operator(self, idname, icon="NONE", **_kwargs):
+        import bpy
+
+        module, op = idname.split(".")
+        getattr(getattr(bpy.ops, module), op).get_rna_type()  # raises for an unknown operator
+        self._check_icon(icon)
+        self.log.append(("operator", idname))
+
+    def label(self, text="", icon="NONE"):
+        self._check_icon(icon)
+        self.log.append(("label", text))
+
+    def progress(self, factor=0.0, type="BAR", text=""):
+        assert 0.0 <= factor <= 1.0 and type in {"BAR", "RING"}
+        self.log.append(("progress", factor, text))
+
+
+def _draw_all(bpy):
+    log = []
+    for name in PANELS:
+        panel = getattr(bpy.types, name)
+        panel.draw(type("P", (), {"layout": _FakeLayout(log)})(), bpy.context)
+    return log
+
+
+def test_panels_draw_settings_state_and_buttons(addon_module_name, bpy_module):
+    bpy = bpy_module
+    log = _draw_all(bpy)
+    props = {entry[1] for entry in log if entry[0] == "prop"}
+    assert {"capture_dir", "units", "armature", "algorithm", "likelihood", "particles", "iterations", "seed",
+            "backend", "use_frame_range", "frame_start", "frame_end", "output_dir"} <= props
+    ops = {entry[1] for entry in log if entry[0] == "operator"}
+    assert ops == {"mocap.import_capture", "mocap.check_subject", "mocap.track", "mocap.export_fbx",
+                   "mocap.export_bvh"}
+    assert not any(entry[0] == "progress" for entry in log)
+
+    # A run in progress with an imported capture, a checked rig and an error to show.
+    cam = bpy.data.objects.new("cam1", bpy.data.cameras.new("cam1"))
+    cam["mocap_resolution"] = [640, 480]
+    coll = bpy.data.collections.new("Mocap Cameras")
+    bpy.context.scene.collection.children.link(coll)
+    coll.objects.link(cam)
+    m = bpy.context.scene.mocap
+    m.capture_frames, m.subject_checked, m.subject_dofs, m.subject_preset = 40, True, 30, "cmu"
+    m.is_tracking, m.progress, m.frames_solved, m.frames_total = True, 0.25, 10, 40
+    m.status, m.last_error = "Tracking frame 10/40", "x" * 300
+    log = _draw_all(bpy)
+    labels = [entry[1] for entry in log if entry[0] == "label"]
+    assert any("1 cameras, 40 frames" in t for t in labels)
+    assert any(t.startswith("cam1") and "640x480" in t for t in labels)
+    assert "30 DOF, preset: cmu" in labels
+    assert any("Esc to cancel" in t for t in labels)
+    assert ("progress", pytest.approx(0.25), "10/40 frames") in log
+    assert sum(len(t) for t in labels if set(t) == {"x"}) == 300  # the long error is wrapped, not cut
+
+
+# ----------------------------------------------------------------------------- check rig
+def _skin_boxes(bpy, arm):
+    """A mesh of one small box per bone, each rigidly weighted to its bone."""
+    verts, faces = [], []
+    corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).T.reshape(-1, 3) * 0.02
+    quads = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3))
+    names = []
+    for bone in arm.data.bones:
+        c = (np.array(bone.head_local) + np.array(bone.tail_local)) / 2
+        base = len(verts)
+        verts += [tuple(c + k) for k in corners]
+        faces += [tuple(base + i for i in q) for q in quads]
+        names.append(bone.name)
+    mesh = bpy.data.meshes.new("Skin")
+    mesh.from_pydata(verts, [], faces)
+    obj = bpy.data.objects.new("Skin", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    for i, name in enumerate(names):
+        obj.vertex_groups.new(name=name).add(list(range(8 * i, 8 * i + 8)), 1.0, "REPLACE")
+    obj.modifiers.new("Armature", "ARMATURE").object = arm
+    return obj
+
+
+def test_check_rig_reports_dof_and_preset(addon_module_name, bpy_module):
+    bpy = bpy_module
+    arm = build_armature(bpy, "cmu_mb_rest.json")
+    _skin_boxes(bpy, arm)
+    assert bpy.ops.mocap.check_subject() == {"FINISHED"}  # the scene's only armature is picked
+    m = bpy.context.scene.mocap
+    assert (m.subject_dofs, m.subject_preset, m.subject_problems) == (30, "cmu", "")
+
+
+def test_check_rig_names_missing_bones_and_missing_skin(addon_module_name, bpy_module):
+    bpy = bpy_module
+    arm = build_armature(bpy, "cmu_mb_rest.json")
+    with pytest.raises(RuntimeError, match="no mesh is skinned"):
+        bpy.ops.mocap.check_subject()
+    _skin_boxes(bpy, arm)
+    arm.data.bones["LeftForeArm"].name = "elbow_thing"
+    bpy.context.scene.mocap.armature = arm
+    with pytest.raises(RuntimeError, match="missing bones: .*LeftForeArm"):
+        bpy.ops.mocap.check_subject()
+    m = bpy.context.scene.mocap
+    assert m.subject_dofs == 0 and "LeftForeArm" in m.subject_problems
+
+
+# ----------------------------------------------------------------------------- track
+Estimate = namedtuple("Estimate", "frame pose joints energy seconds evaluations")
+
+
+class FakeSession:
+    """The TrackSession interface, solving nothing: frame f's 'pose' moves the armature to x = f / 10."""
+
+    last = None
+    fail_at = None  # index of the frame whose solve raises
+    block_at = None  # index of the frame whose solve waits for `release`
+
+    def __init__(self, scene, armature_obj, capture_dir, out_dir, settings, frames=None, resume=False,
+                 progress=None):
+        FakeSession.last = self
+        self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume)
+        self.scene, self.armature = scene, armature_obj
+        self.frames = list(frames) if frames is not None else [0, 1, 2]
+        self.n_total = len(self.frames)
+        self.solved, self.keyed, self.key_threads = [], [], set()
+        self.finished, self.cancelled = None, False
+        self.release, self.blocked = threading.Event(), threading.Event()
+        if progress:
+            progress("fake session", "ready")
+
+    def solve_next(self):
+        index = len(self.solved)
+        if self.cancelled or index >= len(self.frames):
+            return None
+        if index == self.fail_at:
+            raise RuntimeError("boom: the likelihood exploded")
+        if index == self.block_at:
+            self.blocked.set()
+            assert self.release.wait(10)
+        frame = self.frames[index]
+        self.solved.append(frame)
+        return Estimate(frame, np.array([frame / 10.0]), np.zeros((1, 3)), 1.0 / (1 + frame), 0.01, 3000)
+
+    def key(self, estimate):
+        self.key_threads.add(threading.current_thread().name)
+        self.armature.location = (float(estimate.pose[0]), 0.0, 0.0)
+        self.armature.keyframe_insert("location", frame=estimate.frame + self.scene.frame_start)
+        self.keyed.append(estimate.frame)
+
+    def cancel(self):
+        self.cancelled = True
+
+    def finish(self, export=True):
+        self.finished = {"export": export, "frames": list(self.keyed)}
+        return self.finished
+
+
+@pytest.fixture
+def fake_track(addon_module_name, bpy_module, monkeypatch, tmp_path):
+    track = _module(addon_module_name, "operators.track")
+    monkeypatch.setattr(track, "TrackSession", FakeSession)
+    monkeypatch.setattr(FakeSession, "fail_at", None)
+    monkeypatch.setattr(FakeSession, "block_at", None)
+    FakeSession.last = None
+    bpy = bpy_module
+    arm = build_armature(bpy, "cmu_mb_rest.json", name="Performer")
+    m = bpy.context.scene.mocap
+    m.capture_dir, m.output_dir = str(tmp_path / "capture"), str(tmp_path / "out")
+    bpy.context.scene.frame_start = 1
+    compat = _module(addon_module_name, "addon.anim_compat")
+    return bpy, track, arm, compat, tmp_path
+
+
+def test_track_execute_keys_every_frame_and_finishes(fake_track):
+    bpy, _, arm, compat, tmp_path = fake_track
+    m = bpy.context.scene.mocap
+    m.algorithm, m.likelihood, m.particles, m.iterations, m.seed, m.backend = "apf", "silhch+color", 50, 4, 7, "numpy"
+    m.use_frame_range, m.frame_start, m.frame_end = True, 2, 4
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+
+    session = FakeSession.last
+    s = session.args["settings"]
+    assert (s.algorithm, s.likelihood, s.particles, s.iterations, s.seed, s.backend) == (
+        "apf", "silhch+color", 50, 4, 7, "numpy")
+    assert session.args["frames"] == range(2, 5)
+    assert session.args["out_dir"] == tmp_path / "out" and session.args["capture_dir"] == tmp_path / "capture"
+    assert session.armature == arm
+    assert session.keyed == [2, 3, 4] and session.key_threads == {threading.main_thread().name}
+    assert session.finished == {"export": True, "frames": [2, 3, 4]}
+    assert compat.keyed_frames(arm, "location") == [3.0, 4.0, 5.0]  # capture frame + scene start
+    assert (m.frames_solved, m.frames_total, m.progress, m.is_tracking) == (3, 3, pytest.approx(1.0), False)
+    assert m.last_output == str(tmp_path / "out") and m.last_error == ""
+    assert m.seconds_per_frame == pytest.approx(0.01)
+
+
+def test_track_reports_worker_errors_and_keeps_solved_frames(fake_track, monkeypatch):
+    bpy, _, arm, compat, _ = fake_track
+    monkeypatch.setattr(FakeSession, "fail_at", 1)
+    with pytest.raises(RuntimeError, match="boom: the likelihood exploded"):
+        bpy.ops.mocap.track()
+    session = FakeSession.last
+    assert session.keyed == [0] and session.finished is not None
+    assert compat.keyed_frames(arm, "location") == [1.0]
+    m = bpy.context.scene.mocap
+    assert "boom" in m.last_error and not m.is_tracking
+
+
+def test_track_setup_errors_name_the_fix(fake_track):
+    bpy = fake_track[0]
+    m = bpy.context.scene.mocap
+    m.capture_dir = ""
+    with pytest.raises(RuntimeError, match="No capture folder"):
+        bpy.ops.mocap.track()
+    m.capture_dir, m.output_dir = "/somewhere", ""
+    with pytest.raises(RuntimeError, match="No output folder"):
+        bpy.ops.mocap.track()
+    m.output_dir, m.use_frame_range, m.frame_start, m.frame_end = "/out", True, 5, 3
+    with pytest.raises(RuntimeError, match="before the first"):
+        bpy.ops.mocap.track()
+    assert FakeSession.last is None and not m.is_tracking
+
+
+def _drain_until(job, condition, timeout=10.0):
+    end = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < end, "worker did not get there in time"
+        job.drain()
+        time.sleep(0.005)
+
+
+def test_threaded_job_cancel_keeps_solved_frames(fake_track, monkeypatch):
+    """What the modal operator does: worker thread solves, main thread drains/keys, Esc cancels."""
+    bpy, track, arm, compat, _ = fake_track
+    monkeypatch.setattr(FakeSession, "block_at", 1)
+    job = track.TrackJob()
+    session = track.build_session(bpy.context, progress=job.report_progress)
+    job.start(session)
+    _drain_until(job, lambda: len(job.estimates) == 1 and session.blocked.is_set())
+    assert job.status == "fake session ready"
+    assert job.fraction == pytest.approx(1 / 3)
+    job.request_cancel()  # Esc while frame 1 is being solved: it completes, frame 2 never starts
+    session.release.set()
+    _drain_until(job, lambda: job.done)
+    assert job.finish() == {"export": True, "frames": [0, 1]}
+    assert session.solved == [0, 1] and session.keyed == [0, 1]
+    assert session.key_threads == {threading.main_thread().name}
+    assert job.cancelled and job.error is None
+    assert compat.keyed_frames(arm, "location") == [1.0, 2.0]
+    assert not job.thread.is_alive()
+
+
+def test_threaded_job_reports_worker_error(fake_track, monkeypatch):
+    bpy, track, _, _, _ = fake_track
+    monkeypatch.setattr(FakeSession, "fail_at", 2)
+    job = track.TrackJob()
+    job.start(track.build_session(bpy.context))
+    _drain_until(job, lambda: job.done)
+    assert job.error == "RuntimeError: boom: the likelihood exploded"
+    assert [e.frame for e in job.estimates] == [0, 1]
+    job.finish()
+    assert FakeSession.last.finished == {"export": True, "frames": [0, 1]}
