@@ -48,8 +48,11 @@ def output_folder(context):
     return Path(bpy.path.abspath(folder))
 
 
-def build_session(context, progress=None):
-    """Read the scene's settings and construct the tracking session (main thread)."""
+def build_session(context, log=None):
+    """Read the scene's settings and construct the tracking session (main thread).
+
+    `log(message)` receives the session's progress messages; it may be called from any thread.
+    """
     from ..addon.preferences import effective_backend
     from .setup_subject import subject_armature
 
@@ -61,7 +64,7 @@ def build_session(context, progress=None):
     settings.backend = effective_backend(context, props.backend)
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
     return _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
-                            frames=props.frame_range(), resume=props.resume, progress=progress)
+                            frames=props.frame_range(), resume=props.resume, log=log)
 
 
 class TrackJob:
@@ -214,7 +217,9 @@ class MOCAP_OT_track(bpy.types.Operator):
         props = context.scene.mocap
         props.last_error = ""
         try:
-            session = build_session(context, progress=job.report_progress)
+            session = build_session(context, log=job.report_progress)
+            if props.resume and hasattr(session, "key_all"):
+                session.key_all()  # frames solved by the earlier run get their keys back
         except (ValueError, OSError) as exc:
             props.last_error = str(exc)
             self.report({"ERROR"}, str(exc))
@@ -313,8 +318,9 @@ class MOCAP_OT_track(bpy.types.Operator):
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         new = job.drain()
-        if new:
-            context.scene.frame_set(new[-1].frame + context.scene.frame_start)
+        if new:  # show the newest solved pose in the viewport
+            to_scene = getattr(job.session, "scene_frame", lambda f: f + context.scene.frame_start)
+            context.scene.frame_set(to_scene(new[-1].frame))
         if job.error and not job.cancelled:
             job.request_cancel()
         self._refresh(context, job)

@@ -211,8 +211,8 @@ class FakeSession:
     fail_at = None  # index of the frame whose solve raises
     block_at = None  # index of the frame whose solve waits for `release`
 
-    def __init__(self, scene, armature_obj, capture_dir, out_dir, settings, frames=None, resume=False,
-                 progress=None):
+    def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
+                 log=None):
         FakeSession.last = self
         self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume)
         self.scene, self.armature = scene, armature_obj
@@ -221,8 +221,8 @@ class FakeSession:
         self.solved, self.keyed, self.key_threads = [], [], set()
         self.finished, self.cancelled = None, False
         self.release, self.blocked = threading.Event(), threading.Event()
-        if progress:
-            progress("fake session", "ready")
+        if log:
+            log("fake session ready")
 
     def solve_next(self):
         index = len(self.solved)
@@ -329,7 +329,7 @@ def test_threaded_job_cancel_keeps_solved_frames(fake_track, monkeypatch):
     bpy, track, arm, compat, _ = fake_track
     monkeypatch.setattr(FakeSession, "block_at", 1)
     job = track.TrackJob()
-    session = track.build_session(bpy.context, progress=job.report_progress)
+    session = track.build_session(bpy.context, log=job.report_progress)
     job.start(session)
     _drain_until(job, lambda: len(job.estimates) == 1 and session.blocked.is_set())
     assert job.status == "fake session ready"
