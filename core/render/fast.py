@@ -1,0 +1,234 @@
+"""The fast likelihood statistics: one numba kernel, parallel over pose x view, no images kept.
+
+Same rules and same statistics as reference.py (read its docstring first); the arithmetic of the edge
+functions and of 1/z is written in the same order so both paths agree to the last bit on labels.
+
+Per task (one pose in one view) a worker reuses its own label / 1/z / chamfer buffers and touches only
+  * the template's bounding box (+1 pixel ring, cleared before drawing, so no full-image clears),
+  * each triangle's own bounding box while rasterising,
+  * the union of the template and observed boxes for the template chamfer transform (only when the
+    Chamfer silhouette term is on): the 3-4 chamfer distance between two pixels is realised by a
+    staircase path inside their bounding box, so the two-pass transform on that box is exact there.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from .reference import (BOUNDARY, BOUNDARY_OFF, N_BINS, N_STATS, OVERLAP, SUM_DI, SUM_DT, SUM_EDGE_DT, TEMPLATE,
+                        Z_NEAR, FrameTargets)
+
+_BIG = 1 << 40
+
+
+@njit(cache=True, inline="always")
+def _ceil_clamped(v, hi):
+    """ceil(clip(v, -1, hi)) as an int (cheaper than np.ceil + int)."""
+    v = max(-1.0, min(v, float(hi)))
+    i = int(v)
+    return i + 1 if i < v else i
+
+
+@njit(cache=True, inline="always")
+def _floor_clamped(v, hi):
+    v = max(-1.0, min(v, float(hi)))
+    i = int(v)
+    return i - 1 if i > v else i
+
+
+@njit(cache=True)
+def _rasterize(uv, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi):
+    """Draw one mesh into labels/zbuf (zero over the template box); widen each row's drawn span."""
+    for f in range(faces.shape[0]):
+        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+        iza, izb, izc = iz[ia], iz[ib], iz[ic]
+        if iza <= 0.0 or izb <= 0.0 or izc <= 0.0:
+            continue
+        ax, ay = uv[ia, 0], uv[ia, 1]
+        bx, by = uv[ib, 0], uv[ib, 1]
+        cx, cy = uv[ic, 0], uv[ic, 1]
+        area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        if cull * area < 0:
+            continue
+        if area < 0:
+            bx, by, cx, cy = cx, cy, bx, by
+            izb, izc = izc, izb
+            area = -area
+        if not area > 0:
+            continue
+        x0 = max(0, _ceil_clamped(min(ax, min(bx, cx)), w))
+        x1 = min(w - 1, _floor_clamped(max(ax, max(bx, cx)), w))
+        if x1 < x0:
+            continue
+        y0 = max(0, _ceil_clamped(min(ay, min(by, cy)), h))
+        y1 = min(h - 1, _floor_clamped(max(ay, max(by, cy)), h))
+        if y1 < y0:
+            continue
+        # Edge functions as in reference._edge: w0 = (cx-bx)(py-by) - (cy-by)(px-bx), etc.
+        e0x, e0y = cx - bx, cy - by
+        e1x, e1y = ax - cx, ay - cy
+        e2x, e2y = bx - ax, by - ay
+        own0 = e0y < 0 or (e0y == 0 and e0x > 0)  # top-left rule
+        own1 = e1y < 0 or (e1y == 0 and e1x > 0)
+        own2 = e2y < 0 or (e2y == 0 and e2x > 0)
+        lab = face_label[f]
+        for y in range(y0, y1 + 1):
+            py = float(y)
+            r0 = e0x * (py - by)
+            r1 = e1x * (py - cy)
+            r2 = e2x * (py - ay)
+            for x in range(x0, x1 + 1):
+                px = float(x)
+                w0 = r0 - e0y * (px - bx)
+                w1 = r1 - e1y * (px - cx)
+                w2 = r2 - e2y * (px - ax)
+                if (((w0 > 0) or (own0 and w0 == 0)) and ((w1 > 0) or (own1 and w1 == 0))
+                        and ((w2 > 0) or (own2 and w2 == 0))):
+                    inv_z = (w0 * iza + w1 * izb + w2 * izc) / area
+                    if inv_z > zbuf[y, x]:
+                        zbuf[y, x] = inv_z
+                        labels[y, x] = lab
+                        if x < row_lo[y]:
+                            row_lo[y] = x
+                        if x > row_hi[y]:
+                            row_hi[y] = x
+
+
+@njit(cache=True)
+def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt):
+    """Sum over observed pixels of the 3-4 chamfer distance (pixels) to the template."""
+    uy0, uy1 = min(ty0, oy0), max(ty1, oy1)
+    ux0, ux1 = min(tx0, ox0), max(tx1, ox1)
+    for y in range(uy0, uy1 + 1):
+        for x in range(ux0, ux1 + 1):
+            inside = ty0 <= y <= ty1 and tx0 <= x <= tx1 and labels[y, x] > 0
+            dt[y, x] = 0 if inside else _BIG
+    for y in range(uy0, uy1 + 1):
+        for x in range(ux0, ux1 + 1):
+            v = dt[y, x]
+            if y > uy0:
+                v = min(v, dt[y - 1, x] + 3)
+                if x > ux0:
+                    v = min(v, dt[y - 1, x - 1] + 4)
+                if x < ux1:
+                    v = min(v, dt[y - 1, x + 1] + 4)
+            if x > ux0:
+                v = min(v, dt[y, x - 1] + 3)
+            dt[y, x] = v
+    total = 0
+    for y in range(uy1, uy0 - 1, -1):
+        for x in range(ux1, ux0 - 1, -1):
+            v = dt[y, x]
+            if y < uy1:
+                v = min(v, dt[y + 1, x] + 3)
+                if x > ux0:
+                    v = min(v, dt[y + 1, x - 1] + 4)
+                if x < ux1:
+                    v = min(v, dt[y + 1, x + 1] + 4)
+            if x < ux1:
+                v = min(v, dt[y, x + 1] + 3)
+            dt[y, x] = v
+            if oy0 <= y <= oy1 and ox0 <= x <= ox1 and obs[y, x]:
+                total += v
+    return total / 3.0
+
+
+@njit(cache=True)
+def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_dt, ab_bins, obox,
+              need_chamfer, need_color, labels, zbuf, dt, row_lo, row_hi, stats_out, hist_out):
+    # Template box from the vertices in front of the camera.
+    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
+    for v in range(uv.shape[0]):
+        if iz[v] > 0.0:
+            xmin = min(xmin, uv[v, 0])
+            xmax = max(xmax, uv[v, 0])
+            ymin = min(ymin, uv[v, 1])
+            ymax = max(ymax, uv[v, 1])
+    if not xmin <= xmax:
+        return
+    tx0 = max(0, _ceil_clamped(xmin, w))
+    tx1 = min(w - 1, _floor_clamped(xmax, w))
+    ty0 = max(0, _ceil_clamped(ymin, h))
+    ty1 = min(h - 1, _floor_clamped(ymax, h))
+    if tx1 < tx0 or ty1 < ty0:
+        return
+    for y in range(max(0, ty0 - 1), min(h - 1, ty1 + 1) + 1):
+        row_lo[y] = w
+        row_hi[y] = -1
+        for x in range(max(0, tx0 - 1), min(w - 1, tx1 + 1) + 1):
+            labels[y, x] = 0
+            zbuf[y, x] = 0.0
+    _rasterize(uv, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi)
+    n_t = 0
+    n_overlap = 0
+    sum_di = 0.0
+    n_b = 0
+    n_off = 0
+    sum_edt = 0.0
+    for y in range(ty0, ty1 + 1):
+        for x in range(row_lo[y], row_hi[y] + 1):  # only the drawn span of the row
+            lab = labels[y, x]
+            if lab == 0:
+                continue
+            n_t += 1
+            n_overlap += sil[y, x]
+            sum_di += sil_dt[y, x]
+            if ((y > 0 and labels[y - 1, x] != lab) or (y < h - 1 and labels[y + 1, x] != lab)
+                    or (x > 0 and labels[y, x - 1] != lab) or (x < w - 1 and labels[y, x + 1] != lab)):
+                n_b += 1
+                n_off += edge_off[y, x]
+                sum_edt += edge_dt[y, x]
+            if need_color:
+                s = lab - 1
+                hist_out[s, 0, ab_bins[y, x, 0]] += 1
+                hist_out[s, 1, ab_bins[y, x, 1]] += 1
+    stats_out[TEMPLATE] = n_t
+    stats_out[OVERLAP] = n_overlap
+    stats_out[SUM_DI] = sum_di
+    stats_out[BOUNDARY] = n_b
+    stats_out[BOUNDARY_OFF] = n_off
+    stats_out[SUM_EDGE_DT] = sum_edt
+    if need_chamfer and n_t > 0 and obox[1] >= obox[0]:
+        stats_out[SUM_DT] = _chamfer_sum(labels, ty0, ty1, tx0, tx1, sil, obox[0], obox[1], obox[2], obox[3], dt)
+
+
+@njit(parallel=True, cache=True)
+def _statistics_kernel(uv, iz, faces, face_label, cull, widths, heights, sil, sil_dt, edge_off, edge_dt, ab_bins,
+                       obox, need_chamfer, need_color, n_chunks, stats, hist):
+    P, C = uv.shape[0], uv.shape[1]
+    H, W = sil.shape[1], sil.shape[2]
+    n_tasks = P * C
+    for chunk in prange(n_chunks):
+        # One set of buffers per chunk, reused by all its tasks (tasks are dealt round-robin).
+        labels = np.zeros((H, W), dtype=np.int16)
+        zbuf = np.zeros((H, W), dtype=np.float64)
+        dt = np.zeros((H, W) if need_chamfer else (1, 1), dtype=np.int64)
+        row_lo = np.zeros(H, dtype=np.int64)
+        row_hi = np.zeros(H, dtype=np.int64)
+        for task in range(chunk, n_tasks, n_chunks):
+            p = task // C
+            c = task % C
+            _one_task(uv[p, c], iz[p, c], faces, face_label, cull, widths[c], heights[c], sil[c], sil_dt[c],
+                      edge_off[c], edge_dt[c], ab_bins[c], obox[c], need_chamfer, need_color, labels, zbuf, dt,
+                      row_lo, row_hi, stats[p, c], hist[p, c])
+
+
+def statistics(uv, z, faces, face_label, targets: FrameTargets, need_chamfer=True, n_parts=0, cull=0):
+    """Fast path with the reference's signature and results: (P,C,N_STATS) and (P,C,S,2,K)."""
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    z = np.asarray(z, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        iz = np.where(z > Z_NEAR, 1.0 / z, 0.0)  # 0 marks "do not draw"
+    P, C = uv.shape[:2]
+    stats = np.zeros((P, C, N_STATS))
+    hist = np.zeros((P, C, max(n_parts, 1), 2, N_BINS), dtype=np.int32)  # dummy part when colour is off
+    n_chunks = max(1, min(P * C, 4 * numba.get_num_threads()))
+    _statistics_kernel(uv, np.ascontiguousarray(iz), np.ascontiguousarray(faces, dtype=np.int64),
+                       np.ascontiguousarray(face_label, dtype=np.int16), float(cull), targets.widths, targets.heights,
+                       targets.silhouette, targets.silhouette_dt, targets.edge_off, targets.edge_dt,
+                       targets.ab_bins, targets.observed_box, bool(need_chamfer), bool(n_parts), n_chunks,
+                       stats, hist)
+    if not n_parts:
+        hist = np.zeros((P, C, 0, 2, N_BINS), dtype=np.int32)
+    return stats, hist
