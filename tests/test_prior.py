@@ -1,0 +1,93 @@
+"""Anatomical prior: bandwidth rule on hand-made samples, density against the plain formula, gradient, I/O."""
+import numpy as np
+import pytest
+
+from markerless_mocap.core.prior import AnatomicalPrior, PriorError, second_neighbour_bandwidth
+
+
+def test_bandwidth_is_the_largest_second_nearest_neighbour_distance():
+    # 1-D samples 0, 1, 3, 7: 2nd-nearest other sample at distance 3, 2, 3, 6 -> h = 6.
+    assert second_neighbour_bandwidth(np.array([[0.0], [1.0], [3.0], [7.0]])) == pytest.approx(6.0)
+    # 2-D: unit square corners + a far point (10, 0).
+    pts = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [10, 0]], float)
+    # distances from (10,0): 9 to (1,0), sqrt(82) to (1,1), 10 to (0,0) -> 2nd = sqrt(82)
+    assert second_neighbour_bandwidth(pts) == pytest.approx(np.sqrt(82))
+
+
+def _naive_energy(prior, x):
+    total = 0.0
+    for g, idx in prior.groups.items():
+        y, h = prior.samples[g], prior.bandwidths[g]
+        L, d = y.shape
+        k = (2 * np.pi) ** (-d / 2) * np.exp(-np.sum((x[idx] - y) ** 2, axis=1) / (2 * h * h))
+        total += np.log(k.sum() / (L * h ** d))
+    return -total / len(prior.groups)
+
+
+def _training(seed=0, n=300):
+    rng = np.random.default_rng(seed)
+    return rng.normal(0, [0.1, 0.2, 0.3, 0.4, 0.2, 0.1, 0.5], (n, 7)) + np.sin(np.arange(7))
+
+
+GROUPS = {"head": [1, 2], "upper": [3, 4, 5], "lower": [6]}
+
+
+def test_energy_matches_the_parzen_formula_and_stays_finite_far_away():
+    prior = AnatomicalPrior.fit(_training(), GROUPS, n_samples=200, seed=3)
+    assert all(len(s) == 200 for s in prior.samples.values())
+    x = np.random.default_rng(1).normal(0, 0.3, (6, 7)) + np.sin(np.arange(7))
+    e = prior.energy(x)
+    assert e == pytest.approx([_naive_energy(prior, xi) for xi in x], rel=1e-10)
+    assert np.allclose(prior.energy(x[:, :]), [prior.energy(xi)[0] for xi in x])
+    # DOF 0 is in no group: it does not change the energy.
+    moved = x.copy()
+    moved[:, 0] += 5
+    assert np.array_equal(prior.energy(moved), e)
+    far = prior.energy(np.full((1, 7), 1e3))
+    assert np.isfinite(far).all() and far[0] > 1e4
+    # Likely poses score lower than unlikely ones.
+    assert prior.energy(np.sin(np.arange(7))[None])[0] < prior.energy(np.sin(np.arange(7))[None] + 1.0)[0]
+
+
+def test_gradient_matches_finite_differences():
+    prior = AnatomicalPrior.fit(_training(2), GROUPS, n_samples=100, seed=0)
+    x = np.random.default_rng(4).normal(0, 0.3, (3, 7)) + np.sin(np.arange(7))
+    g = prior.gradient(x)
+    eps = 1e-6
+    for i in range(7):
+        dx = np.zeros(7)
+        dx[i] = eps
+        fd = (prior.energy(x + dx) - prior.energy(x - dx)) / (2 * eps)
+        assert np.allclose(g[:, i], fd, rtol=1e-5, atol=1e-7)
+
+
+def test_fit_is_seeded_and_save_load_round_trips(tmp_path):
+    a = AnatomicalPrior.fit(_training(), GROUPS, n_samples=50, seed=7)
+    b = AnatomicalPrior.fit(_training(), GROUPS, n_samples=50, seed=7)
+    c = AnatomicalPrior.fit(_training(), GROUPS, n_samples=50, seed=8)
+    assert np.array_equal(a.samples["upper"], b.samples["upper"])
+    assert not np.array_equal(a.samples["upper"], c.samples["upper"])
+    path = tmp_path / "prior.npz"
+    a.save(path)
+    loaded = AnatomicalPrior.load(path)
+    x = np.random.default_rng(0).normal(0, 0.3, (4, 7))
+    assert np.array_equal(loaded.energy(x), a.energy(x))
+    assert loaded.bandwidths == a.bandwidths
+
+
+def test_bad_training_data_and_files_give_clear_errors(tmp_path):
+    with pytest.raises(PriorError, match="at least 3"):
+        AnatomicalPrior.fit(np.zeros((2, 7)), GROUPS)
+    with pytest.raises(PriorError, match="identical"):
+        AnatomicalPrior.fit(np.ones((10, 7)), GROUPS)
+    with pytest.raises(PriorError, match="NaN"):
+        AnatomicalPrior.fit(np.full((10, 7), np.nan), GROUPS)
+    prior = AnatomicalPrior.fit(_training(), GROUPS, n_samples=20)
+    with pytest.raises(PriorError, match="7 DOF"):
+        prior.energy(np.zeros((1, 6)))
+    with pytest.raises(FileNotFoundError, match="from_motion"):
+        AnatomicalPrior.load(tmp_path / "missing.npz")
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, something=np.zeros(3))
+    with pytest.raises(PriorError, match="not a saved anatomical prior"):
+        AnatomicalPrior.load(bad)
