@@ -1,0 +1,448 @@
+"""Regenerate the sample capture folders (walk, playground) from the shared real data.
+
+    .venv/bin/python sample_scenes/generate.py [--data ../shared/data] [--scene walk|playground|all]
+                                              [--quick] [--samples N] [--no-render]
+
+Deterministic: every random choice comes from a seeded generator per scene. This script (with
+subject.py and stage.py next to it) is the only code that reads the shared data folder; the
+product reads only what this writes under sample_scenes/.
+"""
+import argparse
+import json
+import math
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))      # the engine package `core` (bpy-free, relative imports inside)
+sys.path.insert(0, str(HERE))
+
+import bpy  # noqa: E402
+import cv2  # noqa: E402
+
+import stage  # noqa: E402
+import subject  # noqa: E402
+from core.camera import Camera, camera_from_blender, camera_to_blender, BlenderCameraParams  # noqa: E402,F401
+from core.capture.calibration import write_easymocap_calibration, write_toml_calibration  # noqa: E402
+from core.mocap import read_bvh, retarget  # noqa: E402
+
+W, H, FPS = 640, 480, 30
+
+SCENES = {
+    # start/n_frames in 30-fps frames of the resampled clip
+    "walk": dict(bvh="131_01.bvh", start=128, n_frames=60, seed=131, uncontrolled=False, calibration="toml",
+                 cameras=[  # azimuth deg, radius m, height m, fx px, (dcx, dcy) px, roll deg
+                     (35, 3.7, 1.55, 540, (6.5, -4.0), 1.0),
+                     (125, 3.3, 1.85, 520, (-5.0, 3.5), -1.5),
+                     (215, 3.8, 1.30, 580, (3.0, 7.0), 0.5),
+                     (300, 3.4, 1.70, 500, (-8.0, -2.5), -0.8)]),
+    "playground": dict(bvh="01_01.bvh", start=270, n_frames=66, seed=101, uncontrolled=True, calibration="easymocap",
+                       cameras=[
+                           (15, 3.6, 1.60, 530, (4.0, -6.0), 0.8),
+                           (85, 3.2, 1.35, 500, (-6.0, 2.0), -1.2),
+                           (160, 3.7, 1.90, 560, (7.5, 5.0), 1.5),
+                           (250, 3.4, 1.45, 510, (-3.5, -5.5), -0.4)]),
+}
+MASK_FRAMES = 5
+
+
+def log(*a):
+    print(time.strftime("%H:%M:%S"), *a, flush=True)
+
+
+# ---------------------------------------------------------------- cameras
+def look_at_camera(name, centre, target, fx, dc, roll_deg):
+    """OpenCV camera at `centre` looking at `target` (world Z up), slight roll about the axis."""
+    z = np.asarray(target, float) - centre
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)                       # +y image down
+    Rcw = np.stack([x, y, z])                # rows: camera axes in world
+    a = math.radians(roll_deg)
+    roll = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+    R = roll @ Rcw
+    t = -R @ centre
+    K = np.array([[fx, 0.0, (W - 1) / 2 + dc[0]], [0.0, fx, (H - 1) / 2 + dc[1]], [0.0, 0.0, 1.0]])
+    return Camera(name, K, np.zeros(5), R, t, W, H)
+
+
+def make_cameras(spec, action_centre):
+    cams = []
+    for k, (az, rad, hgt, fx, dc, roll) in enumerate(spec):
+        a = math.radians(az)
+        c = np.array([action_centre[0] + rad * math.cos(a), action_centre[1] + rad * math.sin(a), hgt])
+        target = np.array([action_centre[0], action_centre[1], 0.85])
+        cams.append(look_at_camera(f"cam{k + 1}", c, target, fx, dc, roll))
+    return cams
+
+
+def add_blender_camera(cam):
+    p = camera_to_blender(cam, sensor_width=36.0, sensor_fit="HORIZONTAL")
+    data = bpy.data.cameras.new(cam.name)
+    data.lens_unit = "MILLIMETERS"
+    data.lens = p.lens
+    data.sensor_width = p.sensor_width
+    data.sensor_height = p.sensor_height
+    data.sensor_fit = p.sensor_fit
+    data.shift_x = p.shift_x
+    data.shift_y = p.shift_y
+    data.clip_start = 0.05
+    data.clip_end = 50.0
+    ob = bpy.data.objects.new(cam.name, data)
+    bpy.context.scene.collection.objects.link(ob)
+    from mathutils import Matrix
+    ob.matrix_world = Matrix(p.matrix_world.tolist())
+    return ob, p
+
+
+def blender_camera_record(ob, scene):
+    """The parameters Blender actually holds (read back from the objects, not the intent)."""
+    d = ob.data
+    return dict(name=ob.name, matrix_world=[list(r) for r in ob.matrix_world], lens=d.lens,
+                sensor_width=d.sensor_width, sensor_height=d.sensor_height, sensor_fit=d.sensor_fit,
+                shift_x=d.shift_x, shift_y=d.shift_y, resolution_x=scene.render.resolution_x,
+                resolution_y=scene.render.resolution_y, resolution_percentage=scene.render.resolution_percentage,
+                pixel_aspect_x=scene.render.pixel_aspect_x, pixel_aspect_y=scene.render.pixel_aspect_y)
+
+
+# ---------------------------------------------------------------- motion
+def rest_arrays(arm):
+    names = [b.name for b in arm.data.bones]
+    parents = np.array([names.index(b.parent.name) if b.parent else -1 for b in arm.data.bones])
+    rest = np.array([np.array(b.matrix_local) for b in arm.data.bones])
+    tails = np.array([np.array(b.tail_local) for b in arm.data.bones])
+    return names, parents, rest, tails
+
+
+def key_motion(arm, res, names):
+    from mathutils import Matrix
+    arm.animation_data_clear()
+    root = [n for n, b in zip(names, arm.data.bones) if b.parent is None][0]
+    for pb in arm.pose.bones:
+        pb.rotation_mode = "QUATERNION"
+    F = res.basis_rotations.shape[0]
+    for f in range(F):
+        for b, n in enumerate(names):
+            pb = arm.pose.bones[n]
+            pb.rotation_quaternion = Matrix(res.basis_rotations[f, b].tolist()).to_quaternion()
+            pb.keyframe_insert("rotation_quaternion", frame=f + 1)
+            if n == root:
+                pb.location = res.root_location[f].tolist()
+                pb.keyframe_insert("location", frame=f + 1)
+
+
+def evaluated_joints_and_floor(arm, body, names, F):
+    """Bone heads in world (from Blender's evaluated pose) and the lowest mesh point, per frame."""
+    scene = bpy.context.scene
+    P = np.zeros((F, len(names), 3))
+    low = np.zeros(F)
+    for f in range(F):
+        scene.frame_set(f + 1)
+        dg = bpy.context.evaluated_depsgraph_get()
+        M = np.array(arm.matrix_world)
+        for j, n in enumerate(names):
+            h = np.array(arm.pose.bones[n].head)
+            P[f, j] = M[:3, :3] @ h + M[:3, 3]
+        ev = body.evaluated_get(dg)
+        me = ev.to_mesh()
+        co = np.empty(len(me.vertices) * 3)
+        me.vertices.foreach_get("co", co)
+        Mb = np.array(ev.matrix_world)
+        co = co.reshape(-1, 3) @ Mb[:3, :3].T + Mb[:3, 3]
+        low[f] = co[:, 2].min()
+        ev.to_mesh_clear()
+    return P, low
+
+
+def retarget_scene(cfg, data_dir, arm, F):
+    clip = read_bvh(Path(data_dir) / "cmu" / cfg["bvh"]).resample(FPS)
+    start = cfg["start"]
+    if start + F > clip.n_frames:
+        raise ValueError(f"{cfg['bvh']}: frames {start}..{start + F} exceed the clip ({clip.n_frames} at {FPS} fps)")
+    clip = clip.subset(np.arange(start, start + F))
+    names, parents, rest, tails = rest_arrays(arm)
+    res = retarget(clip, rest, parents, names, target_tails=tails)
+    # centre the action at the origin (horizontally)
+    root_xy = res.pose_matrices[:, names.index("Hips"), :2, 3]
+    shift = -(root_xy.min(axis=0) + root_xy.max(axis=0)) / 2
+    res = retarget(clip, rest, parents, names, target_tails=tails, translation=(shift[0], shift[1], 0.0))
+    return clip, res, names, parents, rest, tails, shift
+
+
+# ---------------------------------------------------------------- rendering
+def setup_cycles(samples, quick):
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.cycles.use_adaptive_sampling = True
+    scene.cycles.adaptive_threshold = 0.05
+    scene.cycles.use_denoising = True
+    try:
+        scene.cycles.denoiser = "OPENIMAGEDENOISE"
+        # measured on 2 shared cores: full-quality OIDN costs 3-4 s per 640x480 frame, FAST ~1 s
+        scene.cycles.denoising_quality = "FAST"
+        scene.cycles.denoising_prefilter = "NONE"
+        scene.cycles.denoising_input_passes = "RGB"
+    except (TypeError, AttributeError):
+        pass
+    scene.cycles.max_bounces = 3
+    scene.cycles.diffuse_bounces = 2
+    scene.cycles.glossy_bounces = 1
+    scene.cycles.transmission_bounces = 1
+    scene.cycles.transparent_max_bounces = 2
+    scene.cycles.seed = 0
+    scene.render.use_persistent_data = True
+    scene.render.resolution_x, scene.render.resolution_y = W, H
+    scene.render.resolution_percentage = 25 if quick else 100
+    scene.render.fps = FPS
+    scene.render.film_transparent = False
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGB"
+    scene.view_settings.view_transform = "AgX"
+    scene.view_settings.look = "AgX - Base Contrast"
+    scene.view_settings.exposure = -0.6
+
+
+def render_views(cam_objs, out_dir, frames):
+    """Render every camera over `frames` into out_dir/<cam>/<frame:04d>.png."""
+    scene = bpy.context.scene
+    for ob in cam_objs:
+        scene.camera = ob
+        d = out_dir / ob.name
+        d.mkdir(parents=True, exist_ok=True)
+        t0 = time.time()
+        for f in frames:
+            scene.frame_set(f + 1)
+            scene.render.filepath = str(d / f"{f:04d}.png")
+            bpy.ops.render.render(write_still=True)
+        log(f"  {ob.name}: {len(frames)} frames in {time.time() - t0:.1f} s")
+
+
+def post_process(img, rng, noise_sigma, blur_sigma):
+    """Camera-like degradation: slight optical blur, then seeded Gaussian sensor noise."""
+    out = img.astype(np.float32)
+    if blur_sigma > 0:
+        out = cv2.GaussianBlur(out, (0, 0), blur_sigma)
+    if noise_sigma > 0:
+        out += rng.normal(0.0, noise_sigma, out.shape).astype(np.float32)
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+def encode_video(frames_dir, path, rng, noise_sigma, blur_sigma):
+    files = sorted(frames_dir.glob("*.png"))
+    first = cv2.imread(str(files[0]))
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), FPS, (first.shape[1], first.shape[0]))
+    if not vw.isOpened():
+        raise RuntimeError(f"cv2.VideoWriter could not open {path}")
+    for f in files:
+        vw.write(post_process(cv2.imread(str(f)), rng, noise_sigma, blur_sigma))
+    vw.release()
+
+
+def render_masks(cam_objs, body, out_dir, frames):
+    """Ground-truth silhouettes with Workbench: the body flat white, everything else hidden."""
+    scene = bpy.context.scene
+    saved = {ob.name: ob.hide_render for ob in scene.objects}
+    for ob in scene.objects:
+        if ob.type in ("MESH", "CURVE", "SURFACE", "META", "FONT") and ob != body:
+            ob.hide_render = True
+    scene.render.engine = "BLENDER_WORKBENCH"
+    shading = scene.display.shading
+    shading.light = "FLAT"
+    shading.color_type = "SINGLE"
+    shading.single_color = (1.0, 1.0, 1.0)
+    shading.background_type = "VIEWPORT"
+    shading.background_color = (0.0, 0.0, 0.0)
+    scene.display.render_aa = "OFF"
+    view = scene.view_settings.view_transform
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    exposure = scene.view_settings.exposure
+    scene.view_settings.exposure = 0.0
+    scene.render.film_transparent = False
+    try:
+        world_col = scene.world.color[:]
+        scene.world.color = (0, 0, 0)
+    except AttributeError:
+        world_col = None
+    tmp = Path(tempfile.mkdtemp(prefix="masks_"))
+    for ob in cam_objs:
+        scene.camera = ob
+        d = out_dir / ob.name
+        d.mkdir(parents=True, exist_ok=True)
+        for f in frames:
+            scene.frame_set(f + 1)
+            scene.render.filepath = str(tmp / "m.png")
+            bpy.ops.render.render(write_still=True)
+            im = cv2.imread(str(tmp / "m.png"), cv2.IMREAD_GRAYSCALE)
+            cv2.imwrite(str(d / f"{f:04d}.png"), np.where(im > 127, 255, 0).astype(np.uint8))
+    shutil.rmtree(tmp, ignore_errors=True)
+    for ob in scene.objects:
+        ob.hide_render = saved.get(ob.name, False)
+    scene.view_settings.view_transform = view
+    scene.view_settings.exposure = exposure
+    if world_col is not None:
+        scene.world.color = world_col
+
+
+# ---------------------------------------------------------------- subject.blend
+def save_subject_blend(data, path, hips_world0, yaw0, rng):
+    """Armature + mesh in rest pose, placed where the person starts with a seeded error."""
+    from mathutils import Matrix
+    bpy.ops.wm.read_homefile(use_empty=True)
+    arm, body = subject.build_subject(bpy, data)
+    ang = rng.uniform(0, 2 * np.pi)
+    offset = 0.10 * np.array([math.cos(ang), math.sin(ang)])
+    dyaw = math.radians(15.0) * (1 if rng.uniform() < 0.5 else -1)
+    yaw = yaw0 + dyaw
+    hips_rest = np.array(arm.data.bones["Hips"].head_local)
+    c, s = math.cos(yaw), math.sin(yaw)
+    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    M = np.eye(4)
+    M[:3, :3] = Rz
+    target = np.array([hips_world0[0] + offset[0], hips_world0[1] + offset[1], hips_rest[2]])
+    M[:3, 3] = target - Rz @ hips_rest
+    arm.matrix_world = Matrix(M.tolist())
+    bpy.context.scene.render.fps = FPS
+    path.parent.mkdir(parents=True, exist_ok=True)
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True)
+    return dict(offset_m=offset.tolist(), offset_norm_m=float(np.linalg.norm(offset)),
+                yaw_error_deg=math.degrees(dyaw), armature_matrix_world=M.tolist())
+
+
+
+
+# ---------------------------------------------------------------- main
+def build_scene(name, data_dir, out_root, samples, quick, render):
+    cfg = SCENES[name]
+    rng = np.random.default_rng(cfg["seed"])
+    F = 8 if quick else cfg["n_frames"]
+    out = out_root / name
+    out.mkdir(parents=True, exist_ok=True)
+    log(f"[{name}] building subject and motion ({F} frames)")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    data = subject.load_subject_data(data_dir)
+    arm, body = subject.build_subject(bpy, data)
+    clip, res, names, parents, rest, tails, shift = retarget_scene(cfg, data_dir, arm, F)
+    key_motion(arm, res, names)
+    scene.frame_start, scene.frame_end = 1, F
+    P, low = evaluated_joints_and_floor(arm, body, names, F)
+    # feet on the floor: the median lowest point (most frames have a foot down) goes to z = 0
+    dz = float(np.median(low))
+    rootb = names.index("Hips")
+    res.root_location = res.root_location - (rest[rootb, :3, :3].T @ np.array([0, 0, dz]))
+    res.pose_matrices[..., 2, 3] -= dz
+    key_motion(arm, res, names)
+    P, low = evaluated_joints_and_floor(arm, body, names, F)
+    err = np.abs(P - res.head_positions()).max()
+    log(f"[{name}] floor shift {dz * 100:.1f} cm; lowest point per frame {low.min():.3f}..{low.max():.3f} m; "
+        f"Blender pose vs retarget heads max diff {err * 1000:.3f} mm")
+    if err > 1e-3:
+        raise RuntimeError("Blender's evaluated pose disagrees with the retargeted pose matrices")
+
+    # where the person is, for cameras and subject.blend
+    hips = P[:, rootb]
+    centre = (hips[:, :2].min(axis=0) + hips[:, :2].max(axis=0)) / 2
+    cams = make_cameras(cfg["cameras"], centre)
+    for cam in cams:
+        uv, depth = cam.project_with_depth(P.reshape(-1, 3))
+        inside = (uv[:, 0] > 8) & (uv[:, 0] < W - 9) & (uv[:, 1] > 8) & (uv[:, 1] < H - 9) & (depth > 0)
+        if not inside.all():
+            raise RuntimeError(f"[{name}] {cam.name}: {np.count_nonzero(~inside)} joint projections leave the image")
+
+    moving = stage.build_room(bpy, rng, cfg["uncontrolled"])
+    stage.animate_moving(bpy, moving, F)
+    stage.build_lights(bpy, cfg["uncontrolled"], F)
+    cam_objs = []
+    records = []
+    setup_cycles(samples, quick)
+    for cam in cams:
+        ob, _ = add_blender_camera(cam)
+        cam_objs.append(ob)
+        records.append(blender_camera_record(ob, scene))
+    (out / "render_cameras.json").write_text(json.dumps(
+        {"note": "Blender camera objects exactly as rendered (created with core.camera.camera_to_blender)",
+         "cameras": records}, indent=1))
+    for old in ("calibration.toml", "intri.yml", "extri.yml"):
+        (out / old).unlink(missing_ok=True)
+    if cfg["calibration"] == "toml":
+        write_toml_calibration(cams, out / "calibration.toml")
+    else:
+        write_easymocap_calibration(cams, out)
+    np.savez_compressed(out / "gt_joints.npz", names=np.array(names), frames=np.arange(F),
+                        positions=P.astype(np.float64), fps=np.float64(FPS),
+                        source=np.array(f"{cfg['bvh']} frames {cfg['start']}..{cfg['start'] + F - 1} at {FPS} fps"))
+    mask_frames = np.linspace(0, F - 1, MASK_FRAMES).round().astype(int).tolist()
+    shutil.rmtree(out / "gt_masks", ignore_errors=True)
+    if render:
+        tmp = Path(tempfile.mkdtemp(prefix=f"render_{name}_"))
+        try:
+            log(f"[{name}] rendering {len(cams)} cameras x {F} frames, {samples} samples")
+            render_views(cam_objs, tmp / "frames", list(range(F)))
+            noise, blur = (4.0, 0.7) if cfg["uncontrolled"] else (1.5, 0.0)
+            (out / "videos").mkdir(exist_ok=True)
+            for k, ob in enumerate(cam_objs):
+                encode_video(tmp / "frames" / ob.name, out / "videos" / f"{ob.name}.mp4",
+                             np.random.default_rng([cfg["seed"], k]), noise, blur)
+            if not cfg["uncontrolled"]:
+                body.hide_render = True
+                render_views(cam_objs, tmp / "plates", [0])
+                body.hide_render = False
+                (out / "background").mkdir(exist_ok=True)
+                for k, ob in enumerate(cam_objs):
+                    img = cv2.imread(str(tmp / "plates" / ob.name / "0000.png"))
+                    cv2.imwrite(str(out / "background" / f"{ob.name}.png"),
+                                post_process(img, np.random.default_rng([cfg["seed"], 100 + k]), noise, blur))
+            keep = tmp / "frames"
+            (out / "preview").mkdir(exist_ok=True)
+            for ob in cam_objs:
+                shutil.copy(keep / ob.name / f"{mask_frames[2]:04d}.png", out / "preview" / f"{ob.name}.png")
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    render_masks(cam_objs, body, out / "gt_masks", mask_frames)
+    # the full scene, for inspection (not committed)
+    bpy.ops.wm.save_as_mainfile(filepath=str(Path(tempfile.gettempdir()) / f"mocap_scene_{name}.blend"))
+
+    # subject.blend: rest pose, near the first frame's root, with a seeded placement error
+    O = res.pose_matrices[0, rootb, :3, :3] @ rest[rootb, :3, :3].T   # root rotation from rest
+    fwd = O @ np.array([0.0, -1.0, 0.0])                             # the rest pose faces -Y
+    yaw0 = math.atan2(fwd[1], fwd[0]) - math.atan2(-1.0, 0.0)
+    placement = save_subject_blend(data, out / "subject.blend", hips[0], yaw0, rng)
+    info = dict(scene=name, source=cfg["bvh"], first_source_frame_30fps=cfg["start"], n_frames=F, fps=FPS,
+                cameras=[c.name for c in cams], mask_frames=mask_frames, samples=samples, quick=quick,
+                floor_shift_m=dz, trajectory_shift_m=np.asarray(shift).tolist(), root_scale=res.root_scale,
+                first_frame_hips=hips[0].tolist(), first_frame_yaw_deg=math.degrees(yaw0),
+                subject_placement=placement)
+    (out / "scene_info.json").write_text(json.dumps(info, indent=1))
+    log(f"[{name}] done -> {out}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", default=str(REPO.parent / "shared" / "data"),
+                    help="folder with cmu/ and makehuman/ (default: ../shared/data next to the repository)")
+    ap.add_argument("--scene", default="all", choices=["walk", "playground", "all"])
+    ap.add_argument("--out", default=str(HERE), help="where the scene folders go (default: sample_scenes/)")
+    ap.add_argument("--samples", type=int, default=4, help="Cycles samples per pixel (denoised)")
+    ap.add_argument("--quick", action="store_true", help="8 frames at quarter resolution: a smoke test")
+    ap.add_argument("--no-render", action="store_true", help="skip the Cycles videos (motion, cameras, masks only)")
+    args = ap.parse_args(argv)
+    data = Path(args.data)
+    if not (data / "cmu").is_dir() or not (data / "makehuman").is_dir():
+        raise SystemExit(f"--data {data}: expected the folders cmu/ and makehuman/ there")
+    names = list(SCENES) if args.scene == "all" else [args.scene]
+    for n in names:
+        build_scene(n, data, Path(args.out), args.samples, args.quick, not args.no_render)
+
+
+if __name__ == "__main__":
+    main()
