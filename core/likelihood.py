@@ -205,12 +205,16 @@ class EnergyModel:
         self.set_reference_pose(body.default_pose())
 
     # ---- geometry ----------------------------------------------------------------------------
+    def _check_poses(self, poses):
+        poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
+        if poses.ndim != 2 or poses.shape[1] != self.body.n_dof:
+            raise LikelihoodError(f"poses must have shape (P, {self.body.n_dof}) for this body's DOF; "
+                                  f"got {poses.shape}")
+        return poses
+
     def project(self, poses):
         """(P,D) -> pixels (P,C,V,2) and depths (P,C,V) of the proxy vertices at the energy resolution."""
-        poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
-        if poses.shape[1] != self.body.n_dof:
-            raise LikelihoodError(f"poses have {poses.shape[1]} values; the body has {self.body.n_dof} DOF")
-        vertices = self.proxy.deform(self.body, poses)
+        vertices = self.proxy.deform(self.body, self._check_poses(poses))
         return render.project_views(vertices, self.cameras)
 
     def _blank_targets(self):
@@ -255,9 +259,10 @@ class EnergyModel:
     def _statistics(self, poses, need_chamfer, need_color):
         if self.targets is None:
             raise LikelihoodError("no frame: call set_frame(features) before evaluating poses")
-        uv, z = self.project(poses)
-        return render.statistics(uv, z, self.faces, self.face_label, self.targets, need_chamfer,
-                                 self.n_parts if need_color else 0, self.cull, backend=self.backend)
+        poses = self._check_poses(poses)
+        vertices = self.proxy.deform(self.body, poses)
+        return render.measure_vertices(vertices, self.cameras, self.faces, self.face_label, self.targets,
+                                       need_chamfer, self.n_parts if need_color else 0, self.cull, self.backend)
 
     def _check_reference(self, which):
         if which == "silh" and np.any(self.reference_area <= 0):

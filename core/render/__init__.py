@@ -42,6 +42,17 @@ def statistics(uv, z, faces, face_label, targets, need_chamfer=True, n_parts=0, 
     return reference.statistics(uv, z, faces, face_label, targets, need_chamfer, n_parts, cull)
 
 
-__all__ = ["statistics", "resolve_backend", "FrameTargets", "RenderInputError", "project_views", "rasterize",
+def measure_vertices(vertices, cameras, faces, face_label, targets, need_chamfer=True, n_parts=0, cull=0,
+                     backend="auto"):
+    """Posed vertices (P,V,3) -> projection into every camera -> `statistics` (fast path: both in numba)."""
+    if resolve_backend(backend) == "fast":
+        from . import fast
+        uv, iz = fast.project_views(vertices, cameras)
+        return fast.statistics_from_inverse_depth(uv, iz, faces, face_label, targets, need_chamfer, n_parts, cull)
+    uv, z = project_views(vertices, cameras)
+    return reference.statistics(uv, z, faces, face_label, targets, need_chamfer, n_parts, cull)
+
+
+__all__ = ["statistics", "measure_vertices", "resolve_backend", "FrameTargets", "RenderInputError", "project_views", "rasterize",
            "render_view", "boundary_mask", "chamfer_34", "ab_to_bins", "N_STATS", "N_BINS", "TEMPLATE", "OVERLAP",
            "SUM_DI", "SUM_DT", "BOUNDARY", "BOUNDARY_OFF", "SUM_EDGE_DT", "BACKENDS"]

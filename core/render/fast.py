@@ -12,6 +12,9 @@ Per task (one pose in one view) a worker reuses its own label / 1/z / chamfer bu
 """
 from __future__ import annotations
 
+import os
+import re
+
 import numba
 import numpy as np
 from numba import njit, prange
@@ -22,7 +25,54 @@ from .reference import (BOUNDARY, BOUNDARY_OFF, N_BINS, N_STATS, OVERLAP, SUM_DI
 _BIG = 1 << 40
 
 
-@njit(cache=True, inline="always")
+# ---------------------------------------------------------------------------------------- JIT cache
+# numba's on-disk cache names a compiled function's module inside the cached data. This file is imported
+# as `markerless_mocap.core.render.fast` (CLI, tests) and as `bl_ext.<repo>.markerless_mocap...` (Blender),
+# and one process cannot load what the other cached (ModuleNotFoundError). So each importing module name
+# gets its own cache folder (numba's own locators with one more path component).
+def _module_keyed(base):
+    class ModuleKeyedLocator(base):
+        def __init__(self, py_func, py_file):
+            super().__init__(py_func, py_file)
+            tag = re.sub(r"[^A-Za-z0-9_.-]", "_", py_func.__module__)
+            self._cache_path = os.path.join(self._cache_path, f"numba-{tag}")
+
+    ModuleKeyedLocator.__name__ = f"ModuleKeyed{base.__name__}"
+    return ModuleKeyedLocator
+
+
+try:
+    from numba.core import caching as _caching
+
+    class _ModuleKeyedImpl(_caching.CompileResultCacheImpl):
+        _locator_classes = [_module_keyed(c) for c in (_caching.UserProvidedCacheLocator,
+                                                       _caching.InTreeCacheLocator,
+                                                       _caching.UserWideCacheLocator)]
+
+    class _ModuleKeyedCache(_caching.FunctionCache):
+        _impl_class = _ModuleKeyedImpl
+except (ImportError, AttributeError):  # a numba without these internals: its default cache
+    _ModuleKeyedCache = None
+
+
+def _jit(**options):
+    """njit with the module-keyed disk cache (numba's default cache if that cannot be set up)."""
+    def wrap(fn):
+        dispatcher = njit(cache=False, **options)(fn)
+        try:
+            dispatcher._cache = _ModuleKeyedCache(dispatcher.py_func)
+        except Exception:  # noqa: BLE001  (changed numba internals, or no usable cache folder)
+            try:
+                dispatcher.enable_caching()
+            except Exception:  # noqa: BLE001  (nowhere to cache: compile in every session)
+                pass
+        return dispatcher
+    return wrap
+
+_TINY = 5e-324  # smallest positive double: w >= _TINY <=> w > 0
+
+
+@_jit(inline="always")
 def _ceil_clamped(v, hi):
     """ceil(clip(v, -1, hi)) as an int (cheaper than np.ceil + int)."""
     v = max(-1.0, min(v, float(hi)))
@@ -30,16 +80,16 @@ def _ceil_clamped(v, hi):
     return i + 1 if i < v else i
 
 
-@njit(cache=True, inline="always")
+@_jit(inline="always")
 def _floor_clamped(v, hi):
     v = max(-1.0, min(v, float(hi)))
     i = int(v)
     return i - 1 if i > v else i
 
 
-@njit(cache=True)
+@_jit()
 def _rasterize(uv, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi):
-    """Draw one mesh into labels/zbuf (zero over the template box); widen each row's drawn span."""
+    """Draw one mesh into labels/zbuf (zero over the template box); widen each row's span to cover it."""
     for f in range(faces.shape[0]):
         ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
         iza, izb, izc = iz[ia], iz[ib], iz[ic]
@@ -69,33 +119,37 @@ def _rasterize(uv, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_
         e0x, e0y = cx - bx, cy - by
         e1x, e1y = ax - cx, ay - cy
         e2x, e2y = bx - ax, by - ay
-        own0 = e0y < 0 or (e0y == 0 and e0x > 0)  # top-left rule
-        own1 = e1y < 0 or (e1y == 0 and e1x > 0)
-        own2 = e2y < 0 or (e2y == 0 and e2x > 0)
+        # Top-left rule as one comparison: w >= 0 on edges the triangle owns, w >= the smallest
+        # positive double (i.e. w > 0) on the others.
+        t0 = 0.0 if (e0y < 0 or (e0y == 0 and e0x > 0)) else _TINY
+        t1 = 0.0 if (e1y < 0 or (e1y == 0 and e1x > 0)) else _TINY
+        t2 = 0.0 if (e2y < 0 or (e2y == 0 and e2x > 0)) else _TINY
+        inv_area = 1.0 / area
         lab = face_label[f]
         for y in range(y0, y1 + 1):
             py = float(y)
             r0 = e0x * (py - by)
             r1 = e1x * (py - cy)
             r2 = e2x * (py - ay)
+            # Branch-free body (selects, no jumps): the inside pattern of tiny triangles is unpredictable.
             for x in range(x0, x1 + 1):
                 px = float(x)
                 w0 = r0 - e0y * (px - bx)
                 w1 = r1 - e1y * (px - cx)
                 w2 = r2 - e2y * (px - ax)
-                if (((w0 > 0) or (own0 and w0 == 0)) and ((w1 > 0) or (own1 and w1 == 0))
-                        and ((w2 > 0) or (own2 and w2 == 0))):
-                    inv_z = (w0 * iza + w1 * izb + w2 * izc) / area
-                    if inv_z > zbuf[y, x]:
-                        zbuf[y, x] = inv_z
-                        labels[y, x] = lab
-                        if x < row_lo[y]:
-                            row_lo[y] = x
-                        if x > row_hi[y]:
-                            row_hi[y] = x
+                inv_z = (w0 * iza + w1 * izb + w2 * izc) * inv_area
+                old = zbuf[y, x]
+                closer = (w0 >= t0) & (w1 >= t1) & (w2 >= t2) & (inv_z > old)
+                zbuf[y, x] = inv_z if closer else old
+                labels[y, x] = lab if closer else labels[y, x]
+            # Conservative drawn span of the row (the triangle's box), for the statistics pass.
+            if x0 < row_lo[y]:
+                row_lo[y] = x0
+            if x1 > row_hi[y]:
+                row_hi[y] = x1
 
 
-@njit(cache=True)
+@_jit()
 def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt):
     """Sum over observed pixels of the 3-4 chamfer distance (pixels) to the template."""
     uy0, uy1 = min(ty0, oy0), max(ty1, oy1)
@@ -134,7 +188,7 @@ def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt):
     return total / 3.0
 
 
-@njit(cache=True)
+@_jit()
 def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_dt, ab_bins, obox,
               need_chamfer, need_color, labels, zbuf, dt, row_lo, row_hi, stats_out, hist_out):
     # Template box from the vertices in front of the camera.
@@ -193,7 +247,7 @@ def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge
         stats_out[SUM_DT] = _chamfer_sum(labels, ty0, ty1, tx0, tx1, sil, obox[0], obox[1], obox[2], obox[3], dt)
 
 
-@njit(parallel=True, cache=True)
+@_jit(parallel=True)
 def _statistics_kernel(uv, iz, faces, face_label, cull, widths, heights, sil, sil_dt, edge_off, edge_dt, ab_bins,
                        obox, need_chamfer, need_color, n_chunks, stats, hist):
     P, C = uv.shape[0], uv.shape[1]
@@ -216,19 +270,82 @@ def _statistics_kernel(uv, iz, faces, face_label, cull, widths, heights, sil, si
 
 def statistics(uv, z, faces, face_label, targets: FrameTargets, need_chamfer=True, n_parts=0, cull=0):
     """Fast path with the reference's signature and results: (P,C,N_STATS) and (P,C,S,2,K)."""
-    uv = np.ascontiguousarray(uv, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     with np.errstate(divide="ignore"):
         iz = np.where(z > Z_NEAR, 1.0 / z, 0.0)  # 0 marks "do not draw"
+    return statistics_from_inverse_depth(uv, iz, faces, face_label, targets, need_chamfer, n_parts, cull)
+
+
+# ---------------------------------------------------------------------------------------- projection
+@_jit(parallel=True)
+def _project_kernel(vertices, R, t, K, dist, has_dist, uv, iz):
+    P, V = vertices.shape[0], vertices.shape[1]
+    C = R.shape[0]
+    for task in prange(P * C):
+        p = task // C
+        c = task % C
+        k1, k2, p1, p2, k3, k4, k5, k6 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4], dist[c, 5], \
+            dist[c, 6], dist[c, 7]
+        s1, s2, s3, s4 = dist[c, 8], dist[c, 9], dist[c, 10], dist[c, 11]
+        for v in range(V):
+            X, Y, Z = vertices[p, v, 0], vertices[p, v, 1], vertices[p, v, 2]
+            xc = R[c, 0, 0] * X + R[c, 0, 1] * Y + R[c, 0, 2] * Z + t[c, 0]
+            yc = R[c, 1, 0] * X + R[c, 1, 1] * Y + R[c, 1, 2] * Z + t[c, 1]
+            zc = R[c, 2, 0] * X + R[c, 2, 1] * Y + R[c, 2, 2] * Z + t[c, 2]
+            if zc <= Z_NEAR:
+                iz[p, c, v] = 0.0
+                uv[p, c, v, 0] = 0.0
+                uv[p, c, v, 1] = 0.0
+                continue
+            x = xc / zc
+            y = yc / zc
+            if has_dist[c]:  # OpenCV's full model, as Camera.distort_normalized
+                r2 = x * x + y * y
+                r4 = r2 * r2
+                r6 = r4 * r2
+                radial = (1 + k1 * r2 + k2 * r4 + k3 * r6) / (1 + k4 * r2 + k5 * r4 + k6 * r6)
+                xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
+                yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+                x, y = xd, yd
+            uv[p, c, v, 0] = K[c, 0, 0] * x + K[c, 0, 1] * y + K[c, 0, 2]
+            uv[p, c, v, 1] = K[c, 1, 1] * y + K[c, 1, 2]
+            iz[p, c, v] = 1.0 / zc
+
+
+def project_views(vertices, cameras):
+    """(P,V,3) world vertices -> pixels (P,C,V,2) and inverse depths (P,C,V), 0 where not drawable (z <= Z_NEAR).
+
+    Same model as reference.project_views (Camera.project_with_depth), parallel over pose x camera, without
+    the NumPy temporaries that dominate the vectorised version for 200 poses x 4 views.
+    """
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    C = len(cameras)
+    R = np.array([c.R for c in cameras], dtype=np.float64)
+    t = np.array([c.t for c in cameras], dtype=np.float64)
+    K = np.array([c.K for c in cameras], dtype=np.float64)
+    dist = np.zeros((C, 12))
+    for i, c in enumerate(cameras):
+        dist[i, :c.dist.size] = c.dist
+    has_dist = np.array([bool(np.any(c.dist)) for c in cameras])
+    P, V = vertices.shape[:2]
+    uv = np.empty((P, C, V, 2))
+    iz = np.empty((P, C, V))
+    _project_kernel(vertices, R, t, K, dist, has_dist, uv, iz)
+    return uv, iz
+
+
+def statistics_from_inverse_depth(uv, iz, faces, face_label, targets: FrameTargets, need_chamfer=True, n_parts=0,
+                                  cull=0):
+    """`statistics` for the output of fast.project_views (inverse depths, 0 = do not draw)."""
     P, C = uv.shape[:2]
     stats = np.zeros((P, C, N_STATS))
     hist = np.zeros((P, C, max(n_parts, 1), 2, N_BINS), dtype=np.int32)  # dummy part when colour is off
     n_chunks = max(1, min(P * C, 4 * numba.get_num_threads()))
-    _statistics_kernel(uv, np.ascontiguousarray(iz), np.ascontiguousarray(faces, dtype=np.int64),
-                       np.ascontiguousarray(face_label, dtype=np.int16), float(cull), targets.widths, targets.heights,
-                       targets.silhouette, targets.silhouette_dt, targets.edge_off, targets.edge_dt,
-                       targets.ab_bins, targets.observed_box, bool(need_chamfer), bool(n_parts), n_chunks,
-                       stats, hist)
+    _statistics_kernel(np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(iz, dtype=np.float64),
+                       np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(face_label, dtype=np.int16),
+                       float(cull), targets.widths, targets.heights, targets.silhouette, targets.silhouette_dt,
+                       targets.edge_off, targets.edge_dt, targets.ab_bins, targets.observed_box, bool(need_chamfer),
+                       bool(n_parts), n_chunks, stats, hist)
     if not n_parts:
-        hist = np.zeros((P, C, 0, 2, N_BINS), dtype=np.int32)
+        hist = hist[:, :, :0]
     return stats, hist

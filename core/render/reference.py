@@ -173,7 +173,7 @@ def rasterize(uv, z, faces, face_label, width, height, cull=0):
               & ((w2 > 0) | ((w2 == 0) & _owns_zero_edge(ax_, ay_, bx_, by_))))
     t, px, py = t[inside], px[inside].astype(np.int64), py[inside].astype(np.int64)
     w0, w1, w2 = w0[inside], w1[inside], w2[inside]
-    inv_z = (w0 * (1.0 / za[t]) + w1 * (1.0 / zb[t]) + w2 * (1.0 / zc[t])) / area[t]
+    inv_z = (w0 * (1.0 / za[t]) + w1 * (1.0 / zb[t]) + w2 * (1.0 / zc[t])) * (1.0 / area[t])
     pixel = py * width + px
     order = np.lexsort((t, -inv_z, pixel))  # per pixel: nearest first, then lowest triangle index
     pixel, t = pixel[order], t[order]

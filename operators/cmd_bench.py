@@ -1,0 +1,186 @@
+"""`bench`: speed of the likelihood engine (FK + LBS, reference NumPy path, fast numba path).
+
+Scene: the sample subject (sample_scenes/walk/subject.blend or --subject). With the walk capture present
+(calibration + videos + background plates) its cameras and first frame give the observed features;
+otherwise 4 synthetic 640x480 cameras ring the subject and the "observation" is the body itself,
+rendered by the reference path at a known pose (its silhouette, and its part boundaries as edges).
+The poses evaluated scatter around that pose. The reference path is timed on a few poses and scaled up.
+Ends with one JSON line: reference_s, fast_s, ratio, fk_lbs_s, poses, views, resolution, backend, ...
+"""
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+WALK = REPO_ROOT / "sample_scenes" / "walk"
+
+
+def add_arguments(parser):
+    parser.add_argument("--subject", type=Path, default=WALK / "subject.blend",
+                        help="the .blend holding the rigged, skinned subject (default: the walk sample's)")
+    parser.add_argument("--capture", type=Path, default=WALK,
+                        help="capture folder whose first frame gives the observation (default: the walk sample; "
+                             "synthetic cameras if it cannot be loaded)")
+    parser.add_argument("--poses", type=int, default=200, help="poses per batch (default 200)")
+    parser.add_argument("--likelihood", default="silh+edge", help="likelihood name (default silh+edge)")
+    parser.add_argument("--scale", type=float, default=None,
+                        help="energy resolution as a fraction of the capture's (default: the engine's)")
+    parser.add_argument("--reference-poses", type=int, default=4,
+                        help="poses the slow reference path is timed on, then scaled to --poses (default 4)")
+    parser.add_argument("--repeats", type=int, default=7, help="timed repeats; the fastest counts (default 7)")
+    parser.add_argument("--backend", default="auto", choices=["auto", "fast", "numpy"],
+                        help="backend timed as the fast path (default auto)")
+
+
+def _best(fn, repeats):
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def ring_cameras(centre, n=4, radius=3.5, height=0.3, focal=550.0, size=(640, 480)):
+    """n OpenCV cameras on a circle around `centre` (world Z up), all looking at it."""
+    from ..core.camera import Camera
+
+    cams = []
+    for i in range(n):
+        a = np.deg2rad(20 + 360.0 * i / n)
+        eye = np.asarray(centre, float) + [radius * np.cos(a), radius * np.sin(a), height]
+        fwd = centre - eye
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        R = np.stack([right, np.cross(fwd, right), fwd])
+        K = np.array([[focal, 0, (size[0] - 1) / 2], [0, focal, (size[1] - 1) / 2], [0, 0, 1]])
+        cams.append(Camera(f"ring{i + 1}", K, np.zeros(0), R, -R @ eye, size[0], size[1]))
+    return cams
+
+
+def load_body(subject):
+    import bpy
+
+    from ..addon.scene_bridge import body_from_blender, find_armature
+    from ..core.proxy import make_proxy
+
+    if not Path(subject).is_file():
+        raise FileNotFoundError(f"subject file {subject} does not exist: generate the sample scene "
+                                "(bash setup.sh samples) or pass --subject PATH to a .blend with a rigged mesh")
+    bpy.ops.wm.open_mainfile(filepath=str(subject))
+    arm = find_armature(bpy.context.scene)
+    body = body_from_blender(arm)
+    return body, make_proxy(body, 2000)
+
+
+def _capture_scene(folder, body):
+    """(cameras, first-frame features, pose near the subject) from a capture folder, or None."""
+    try:
+        from ..core.capture.capture import load_capture
+        from ..core.features import BackgroundModel, compute_view_features
+
+        capture = load_capture(folder)
+        if not capture.backgrounds or len(capture.backgrounds) != len(capture.cameras):
+            capture.close()
+            return None
+        images = capture.frames.read(0)
+        feats = [compute_view_features(images[c.name], BackgroundModel.from_plate(capture.backgrounds[c.name]))
+                 for c in capture.cameras]
+        cameras = capture.cameras
+        capture.close()
+        pose = body.default_pose()
+        gt = Path(folder) / "gt_joints.npz"
+        if gt.is_file():
+            with np.load(gt) as d:
+                pose[body.translation_dofs] = d["positions"][0].mean(axis=0)
+        return cameras, feats, pose
+    except Exception as exc:  # noqa: BLE001  (any unusable capture: fall back to the synthetic scene)
+        print(f"bench: capture {folder} not usable ({exc}); using synthetic cameras", file=sys.stderr)
+        return None
+
+
+def synthetic_features(model, pose):
+    from ..core.features.view_features import ViewFeatures, distance_to_mask
+    from ..core.features.view_features import EDGE_DT_CAP_PX
+
+    feats = []
+    for v in range(len(model.cameras)):
+        labels, sil, boundary = model.render(pose, v)
+        ab = np.zeros(sil.shape + (2,), np.float32)
+        feats.append(ViewFeatures(sil, distance_to_mask(sil), boundary,
+                                  np.minimum(distance_to_mask(boundary), EDGE_DT_CAP_PX * model.scale), ab,
+                                  model.scale))
+    return feats
+
+
+def run(args):
+    from ..core import likelihood as lk
+    from ..core import render
+
+    if args.poses < 1 or args.reference_poses < 1 or args.repeats < 1:
+        print("bench: --poses, --reference-poses and --repeats must be at least 1", file=sys.stderr)
+        return 2
+    try:
+        body, proxy = load_body(args.subject)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"bench: {exc}", file=sys.stderr)
+        return 1
+    scale = lk.ENERGY_SCALE if args.scale is None else args.scale
+    rng = np.random.default_rng(0)
+    scene = _capture_scene(args.capture, body) if args.capture and Path(args.capture).is_dir() else None
+    lo = np.where(np.isfinite(body.lower), body.lower, -0.3)
+    hi = np.where(np.isfinite(body.upper), body.upper, 0.3)
+    if scene is None:
+        centre = body.default_pose()
+        cameras = ring_cameras(centre[body.translation_dofs])
+        observed = centre.copy()
+        joints = np.setdiff1d(np.arange(body.n_dof), np.r_[body.translation_dofs, body.root_rotation_dofs])
+        observed[joints] = np.clip(rng.normal(0, 0.2, len(joints)), lo[joints], hi[joints])
+        source = "synthetic ring of 4 cameras, observation = body rendered at a known pose"
+    else:
+        cameras, feats, observed = scene
+        source = f"capture {args.capture} frame 0"
+    with warnings.catch_warnings():  # the image terms are timed; the prior (cheap) is not part of it
+        warnings.filterwarnings("ignore", message=".*anatomical prior.*")
+        fast_model = lk.EnergyModel(body, proxy, cameras, args.likelihood, scale=scale, backend=args.backend)
+        ref_model = lk.EnergyModel(body, proxy, cameras, args.likelihood, scale=scale, backend="numpy")
+    if scene is None:
+        feats = synthetic_features(ref_model, observed)
+    for m in (fast_model, ref_model):
+        m.set_reference_pose(lk.default_pose_at(body, observed))
+        m.set_frame(feats)
+    poses = np.tile(observed, (args.poses, 1))
+    poses += rng.normal(0, 1, poses.shape) * body.scale
+    poses = np.clip(poses, body.lower, body.upper)
+
+    w, h = fast_model.cameras[0].width, fast_model.cameras[0].height
+    print(f"subject: {args.subject} ({len(proxy.faces)} proxy triangles, {body.n_dof} DOF)")
+    print(f"scene: {source}; {len(cameras)} views at {cameras[0].width}x{cameras[0].height}, "
+          f"energy resolution {w}x{h} (scale {scale:g}), likelihood {args.likelihood}, "
+          f"back-face culling {'on' if fast_model.cull else 'off'}")
+    fk = _best(lambda: proxy.deform(body, poses), args.repeats)
+    print(f"FK + LBS, {args.poses} poses: {fk * 1e3:.1f} ms")
+    t = time.perf_counter()
+    fast_model(poses)  # JIT compile (or load the cache) and warm up
+    print(f"first fast call (JIT or cache load): {time.perf_counter() - t:.2f} s")
+    fast = _best(lambda: fast_model(poses), args.repeats)
+    backend = fast_model.backend
+    print(f"{backend} path, {args.poses} poses x {len(cameras)} views (incl. FK, LBS, projection): {fast * 1e3:.1f} ms")
+    n_ref = min(args.reference_poses, args.poses)
+    ref_few = _best(lambda: ref_model(poses[:n_ref]), max(1, min(3, args.repeats)))
+    ref = ref_few * args.poses / n_ref
+    print(f"reference path: {ref_few * 1e3:.1f} ms for {n_ref} poses -> {ref:.2f} s for {args.poses} "
+          f"(extrapolated linearly)")
+    agree = np.allclose(fast_model(poses[:n_ref]), ref_model(poses[:n_ref]), rtol=0.01)
+    print(f"ratio reference / fast: {ref / fast:.1f}x; energies agree within 1%: {agree}")
+    print(json.dumps({"reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
+                      "fk_lbs_s": round(fk, 4), "poses": args.poses, "views": len(cameras),
+                      "resolution": f"{w}x{h}", "backend": backend, "likelihood": args.likelihood,
+                      "reference_poses_timed": n_ref, "energies_agree": bool(agree),
+                      "render_backends": list(render.BACKENDS)}))
+    return 0
