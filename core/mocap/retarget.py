@@ -134,22 +134,21 @@ def _children(parents):
     return ch
 
 
-def _source_direction(clip, Q, s, toward):
+def _source_direction(parents, Q, end_sites, s, toward):
     """Rest direction of source joint s's segment toward joint `toward` (a descendant, or None),
-    walking on through zero-length links (CMU BVHs put Neck and the collars on Spine1)."""
-    children = _children(clip.parents)
+    walking on through zero-length links (CMU BVHs put Neck and the collars on Spine1).
+    Q: (J, 3) rest joints and end_sites {joint: offset}, both already in the target frame."""
+    children = _children(parents)
     cur = toward
-    for _ in range(clip.n_joints):
+    for _ in range(len(parents)):
         if cur is None:
             break
         v = Q[cur] - Q[s]
         if np.linalg.norm(v) > 1e-6:
             return v
         cur = children[cur][0] if children[cur] else None
-        if cur is None and toward in clip.end_sites:
-            break
-    if s in clip.end_sites and np.linalg.norm(clip.end_sites[s]) > 1e-9:
-        return clip.end_sites[s]   # in the caller's frame (rotated below)
+    if s in end_sites and np.linalg.norm(end_sites[s]) > 1e-9:
+        return end_sites[s]
     for c in children[s]:
         v = Q[c] - Q[s]
         if np.linalg.norm(v) > 1e-6:
@@ -245,12 +244,7 @@ def retarget(clip, target_rest, target_parents, target_names, name_map=None, roo
                 along = offset @ tail_dir / length if length > 1e-6 else -2.0
                 if along > best:
                     best, toward = along, src_idx[c]
-        saved = clip.end_sites
-        clip.end_sites = end_sites_t        # so the end-site fallback is in target axes
-        try:
-            v = _source_direction(clip, Q, s, toward)
-        finally:
-            clip.end_sites = saved
+        v = _source_direction(clip.parents, Q, end_sites_t, s, toward)
         if v is not None:
             A[b] = rotation_between(tail_dir, v)
 

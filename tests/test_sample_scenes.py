@@ -1,0 +1,153 @@
+"""The bundled sample scenes are self-consistent: ground truth, calibration, masks, cameras, subject.
+
+Regenerate them with `.venv/bin/python sample_scenes/generate.py` (see sample_scenes/README.md).
+"""
+import json
+import math
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blender
+from markerless_mocap.core.capture.calibration import read_calibration
+
+SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
+SCENES = ["walk", "playground"]
+
+
+def scene_dir(name):
+    d = SCENES_ROOT / name
+    if not (d / "scene_info.json").is_file():
+        pytest.skip(f"{d} not generated (run sample_scenes/generate.py)")
+    return d
+
+
+def load_gt(d):
+    with np.load(d / "gt_joints.npz") as z:
+        return [str(n) for n in z["names"]], z["frames"], z["positions"]
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_capture_folder_layout(name):
+    d = scene_dir(name)
+    info = json.loads((d / "scene_info.json").read_text())
+    cams = read_calibration(d)
+    assert [c.name for c in cams] == info["cameras"]
+    assert 4 <= len(cams) <= 5
+    names, frames, P = load_gt(d)
+    assert len(names) == 31 and P.shape == (len(frames), 31, 3)
+    assert 60 <= len(frames) <= 120 and np.array_equal(frames, np.arange(len(frames)))
+    assert np.all(np.isfinite(P))
+    # feet on the floor: the lowest joint is within a few cm of z = 0 in most frames
+    assert abs(np.median(P[..., 2].min(axis=1))) < 0.12
+    if (d / "videos").is_dir():
+        for c in cams:
+            cap = cv2.VideoCapture(str(d / "videos" / f"{c.name}.mp4"))
+            assert cap.isOpened(), c.name
+            assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(frames)
+            assert (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))) == c.size
+            cap.release()
+    if name == "walk":
+        for c in cams:
+            plate = cv2.imread(str(d / "background" / f"{c.name}.png"))
+            assert plate is not None and plate.shape == (c.height, c.width, 3)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_ground_truth_joints_land_inside_the_silhouettes(name):
+    d = scene_dir(name)
+    cams = read_calibration(d)
+    names, frames, P = load_gt(d)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))    # 2-pixel dilation
+    hits = total = 0
+    for c in cams:
+        mask_files = sorted((d / "gt_masks" / c.name).glob("*.png"))
+        assert len(mask_files) >= 5, c.name
+        for mf in mask_files:
+            f = int(mf.stem)
+            mask = cv2.imread(str(mf), cv2.IMREAD_GRAYSCALE)
+            assert mask.shape == (c.height, c.width)
+            assert 0.002 < np.count_nonzero(mask) / mask.size < 0.3    # a person, not empty or full
+            grown = cv2.dilate(mask, kernel) > 0
+            uv = np.rint(c.project(P[f])).astype(int)
+            ok = (uv[:, 0] >= 0) & (uv[:, 0] < c.width) & (uv[:, 1] >= 0) & (uv[:, 1] < c.height)
+            inside = np.zeros(len(uv), bool)
+            inside[ok] = grown[uv[ok, 1], uv[ok, 0]]
+            hits += int(inside.sum())
+            total += len(uv)
+    assert total >= 31 * 5 * 4
+    assert hits / total >= 0.99, f"{hits}/{total} joint projections inside the masks"
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_joints_miss_shifted_masks(name):
+    """Negative control: the same check with the masks moved by 25 px fails clearly."""
+    d = scene_dir(name)
+    cams = read_calibration(d)
+    _, _, P = load_gt(d)
+    hits = total = 0
+    for c in cams:
+        for mf in sorted((d / "gt_masks" / c.name).glob("*.png")):
+            mask = np.roll(cv2.imread(str(mf), cv2.IMREAD_GRAYSCALE), 25, axis=1) > 0
+            uv = np.rint(c.project(P[int(mf.stem)])).astype(int)
+            uv = np.clip(uv, 0, [c.width - 1, c.height - 1])
+            hits += int(mask[uv[:, 1], uv[:, 0]].sum())
+            total += len(uv)
+    assert hits / total < 0.9
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_calibration_reproduces_the_render_cameras(name):
+    d = scene_dir(name)
+    rec = json.loads((d / "render_cameras.json").read_text())["cameras"]
+    cams = {c.name: c for c in read_calibration(d)}
+    assert sorted(cams) == sorted(r["name"] for r in rec)
+    for r in rec:
+        assert r["resolution_percentage"] == 100
+        params = BlenderCameraParams(np.array(r["matrix_world"]), r["lens"], r["sensor_width"], r["sensor_height"],
+                                     r["sensor_fit"], r["shift_x"], r["shift_y"], r["resolution_x"],
+                                     r["resolution_y"], r["pixel_aspect_x"], r["pixel_aspect_y"], r["name"])
+        rendered = camera_from_blender(params)
+        cal = cams[r["name"]]
+        # Blender stores lens/shift as float32: compare K relative to the focal length
+        np.testing.assert_allclose(rendered.K, cal.K, rtol=0, atol=1e-6 * cal.K[0, 0])
+        np.testing.assert_allclose(rendered.R, cal.R, atol=1e-6)
+        np.testing.assert_allclose(rendered.t, cal.t, atol=1e-6)
+        assert cal.size == (r["resolution_x"], r["resolution_y"])
+        assert np.all(cal.dist == 0)
+        assert 1.2 <= cal.center[2] <= 2.0
+
+
+@pytest.mark.bpy
+@pytest.mark.parametrize("name", SCENES)
+def test_subject_blend_is_a_rest_pose_rig_near_the_start(name, bpy_module):
+    bpy = bpy_module
+    d = scene_dir(name)
+    bpy.ops.wm.open_mainfile(filepath=str(d / "subject.blend"))
+    arms = [o for o in bpy.data.objects if o.type == "ARMATURE"]
+    meshes = [o for o in bpy.data.objects if o.type == "MESH"]
+    assert len(arms) == 1 and len(meshes) == 1
+    arm, body = arms[0], meshes[0]
+    assert len(arm.data.bones) == 31 and body.parent == arm
+    assert any(m.type == "ARMATURE" and m.object == arm for m in body.modifiers)
+    tris = sum(len(p.vertices) - 2 for p in body.data.polygons)
+    assert 5000 <= tris <= 6000
+    assert {g.name for g in body.vertex_groups} == {b.name for b in arm.data.bones}
+    sums = np.array([sum(g.weight for g in v.groups) for v in body.data.vertices])
+    np.testing.assert_allclose(sums, 1.0, atol=1e-4)
+    assert arm.animation_data is None or arm.animation_data.action is None
+    for pb in arm.pose.bones:
+        np.testing.assert_allclose(np.array(pb.matrix_basis), np.eye(4), atol=1e-9)
+    # placed where the person starts, with a small honest error (architecture: 20 cm, 30 degrees)
+    names, _, P = load_gt(d)
+    M = np.array(arm.matrix_world)
+    hips = M[:3, :3] @ np.array(arm.data.bones["Hips"].head_local) + M[:3, 3]
+    err = np.linalg.norm(hips[:2] - P[0, names.index("Hips"), :2])
+    assert 0.03 < err < 0.20
+    info = json.loads((d / "scene_info.json").read_text())
+    yaw = math.degrees(math.atan2(M[1, 0], M[0, 0]))
+    dyaw = (yaw - info["first_frame_yaw_deg"] + 180) % 360 - 180
+    assert 5 < abs(dyaw) < 30
