@@ -55,7 +55,8 @@ def test_asf_amc_reproduces_bvh_of_the_same_trial(bvh01, amc01):
     assert amc01.n_frames == 30 and amc01.units_to_metres == pytest.approx(0.0254 / 0.45)
     pb = bvh01.world_positions(np.arange(1, 31), metres=True)     # BVH frame 0 is a T-pose
     pa = amc01.world_positions(np.arange(0, 30), metres=True)
-    asf_len = {"thorax": 2.06488, "lwrist": None, "rwrist": None}
+    # length of a dropped ASF segment = the rest offset of its child (thorax -> lowerneck, wrist -> hand)
+    seg_child = {"thorax": "lowerneck", "lwrist": "lhand", "rwrist": "rhand"}
     checked = 0
     for jb, name in enumerate(bvh01.joint_names):
         ja = amc01.index(BVH_TO_ASF[name])
@@ -67,10 +68,8 @@ def test_asf_amc_reproduces_bvh_of_the_same_trial(bvh01, amc01):
         va = pa[:, ja] - pa[:, paj]
         gap = np.linalg.norm(vb - va, axis=-1)
         if name in DROPPED:
-            seg = DROPPED[name]
-            expected = asf_len[seg] if asf_len[seg] else np.linalg.norm(amc01.end_sites.get(amc01.index(seg), 0)) or None
-            if expected is None:   # wrist: its length is the offset of its children
-                expected = np.linalg.norm(amc01.offsets[amc01.index("lhand" if seg == "lwrist" else "rhand")])
+            expected = np.linalg.norm(amc01.offsets[amc01.index(seg_child[DROPPED[name]])])
+            assert expected > 1.0     # a real segment (CMU units), not a zero-length link
             np.testing.assert_allclose(gap, expected * amc01.units_to_metres, rtol=1e-3)
         else:
             assert gap.max() < 1e-4, (name, gap.max())
