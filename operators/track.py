@@ -191,7 +191,7 @@ class TrackJob:
         return self.session.finish(export=export)
 
 
-def _status_line(job, props):
+def _status_line(job):
     text = f"Tracking frame {job._done_before + len(job.estimates)}/{job._total}"
     if job.estimates:
         text += f", {job.seconds_per_frame:.1f} s/frame, energy {job.estimates[-1].energy:.3g}"
@@ -233,7 +233,7 @@ class MOCAP_OT_track(bpy.types.Operator):
         props.is_tracking = True
         props.progress = 0.0
         props.frames_solved = 0
-        props.frames_total = job._total or len(session.frames)
+        props.frames_total = int(getattr(session, "n_total", 0) or len(session.frames))
         props.seconds_per_frame = 0.0
         props.status = "Starting"
         return job, session
@@ -241,10 +241,10 @@ class MOCAP_OT_track(bpy.types.Operator):
     def _show(self, context, job):
         props = context.scene.mocap
         props.progress = job.fraction
-        props.frames_solved = len(job.estimates)
+        props.frames_solved = job._done_before + len(job.estimates)  # a resumed run counts the earlier frames
         props.frames_total = job._total
         props.seconds_per_frame = job.seconds_per_frame
-        props.status = "Cancelling after the current frame" if job.cancelled and not job.done else _status_line(job, props)
+        props.status = "Cancelling after the current frame" if job.cancelled and not job.done else _status_line(job)
 
     def _end(self, context, job):
         props = context.scene.mocap

@@ -219,13 +219,15 @@ class FakeSession:
         self.frames = list(frames) if frames is not None else [0, 1, 2]
         self.n_total = len(self.frames)
         self.solved, self.keyed, self.key_threads = [], [], set()
+        if resume:  # an earlier run solved the first two frames
+            self.solved, self.frames = self.frames[:2], self.frames[2:]
         self.finished, self.cancelled = None, False
         self.release, self.blocked = threading.Event(), threading.Event()
         if log:
             log("fake session ready")
 
     def solve_next(self):
-        index = len(self.solved)
+        index = len(self.solved) - (self.n_total - len(self.frames))
         if self.cancelled or index >= len(self.frames):
             return None
         if index == self.fail_at:
@@ -242,6 +244,10 @@ class FakeSession:
         self.armature.location = (float(estimate.pose[0]), 0.0, 0.0)
         self.armature.keyframe_insert("location", frame=estimate.frame + self.scene.frame_start)
         self.keyed.append(estimate.frame)
+
+    def key_all(self):
+        for frame in self.solved:
+            self.key(Estimate(frame, np.array([frame / 10.0]), None, 0.0, 0.0, 0))
 
     def cancel(self):
         self.cancelled = True
@@ -287,6 +293,18 @@ def test_track_execute_keys_every_frame_and_finishes(fake_track):
     assert (m.frames_solved, m.frames_total, m.progress, m.is_tracking) == (3, 3, pytest.approx(1.0), False)
     assert m.last_output == str(tmp_path / "out") and m.last_error == ""
     assert m.seconds_per_frame == pytest.approx(0.01)
+
+
+def test_track_resume_rekeys_earlier_frames_and_counts_them(fake_track):
+    bpy, _, arm, compat, _ = fake_track
+    m = bpy.context.scene.mocap
+    m.resume = True
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    session = FakeSession.last
+    assert session.args["resume"] is True and session.solved == [0, 1, 2]
+    assert session.keyed == [0, 1, 2]  # two re-keyed from the earlier run, one solved now
+    assert compat.keyed_frames(arm, "location") == [1.0, 2.0, 3.0]
+    assert (m.frames_solved, m.frames_total, m.progress) == (3, 3, pytest.approx(1.0))
 
 
 def test_track_reports_worker_errors_and_keeps_solved_frames(fake_track, monkeypatch):
