@@ -112,13 +112,27 @@ class MocapSettings(bpy.types.PropertyGroup):
 classes = (MocapSettings,)
 
 
+@bpy.app.handlers.persistent
+def reset_run_state(_file=None):
+    """A .blend saved during a run (or by a crashed Blender) must not open as 'tracking': the Track
+    button would stay disabled for good."""
+    for scene in bpy.data.scenes:
+        props = getattr(scene, "mocap", None)
+        if props is not None and props.is_tracking:
+            props.is_tracking = False
+            props.status = "The previous run did not finish; its solved frames are in the output folder"
+
+
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.mocap = PointerProperty(type=MocapSettings)
+    bpy.app.handlers.load_post.append(reset_run_state)
 
 
 def unregister():
+    if reset_run_state in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(reset_run_state)
     del bpy.types.Scene.mocap
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -248,6 +248,7 @@ class MOCAP_OT_track(bpy.types.Operator):
 
     def _end(self, context, job):
         props = context.scene.mocap
+        props.is_tracking = False  # before finish(): it saves tracked.blend
         summary = None
         try:
             summary = job.finish()
@@ -255,7 +256,6 @@ class MOCAP_OT_track(bpy.types.Operator):
             traceback.print_exc()
             job._fail(f"writing the results failed: {type(exc).__name__}: {exc}", "")
         self._show(context, job)
-        props.is_tracking = False
         if summary is not None:
             props.last_output = str(job.out_dir)
         solved = len(job.estimates)

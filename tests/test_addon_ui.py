@@ -373,3 +373,14 @@ def test_threaded_job_reports_worker_error(fake_track, monkeypatch):
     assert [e.frame for e in job.estimates] == [0, 1]
     job.finish()
     assert FakeSession.last.finished == {"export": True, "frames": [0, 1]}
+
+
+def test_a_blend_saved_mid_run_opens_ready_to_track(addon_module_name, bpy_module, tmp_path):
+    bpy = bpy_module
+    bpy.context.scene.mocap.is_tracking = True
+    path = tmp_path / "saved_while_tracking.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), copy=True)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    m = bpy.context.scene.mocap
+    assert not m.is_tracking and "did not finish" in m.status
+    assert bpy.ops.mocap.track.poll()
