@@ -19,8 +19,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from .reference import (BOUNDARY, BOUNDARY_OFF, N_BINS, N_STATS, OVERLAP, SUM_DI, SUM_DT, SUM_EDGE_DT, TEMPLATE,
-                        Z_NEAR, FrameTargets)
+from .reference import (BOUNDARY, BOUNDARY_OFF, MAX_COORD_PX, N_BINS, N_STATS, OVERLAP, SUBPIXEL, SUM_DI, SUM_DT,
+                        SUM_EDGE_DT, TEMPLATE, Z_NEAR, FrameTargets)
 
 _BIG = 1 << 40
 
@@ -69,22 +69,6 @@ def _jit(**options):
         return dispatcher
     return wrap
 
-_TINY = 5e-324  # smallest positive double: w >= _TINY <=> w > 0
-
-
-@_jit(inline="always")
-def _ceil_clamped(v, hi):
-    """ceil(clip(v, -1, hi)) as an int (cheaper than np.ceil + int)."""
-    v = max(-1.0, min(v, float(hi)))
-    i = int(v)
-    return i + 1 if i < v else i
-
-
-@_jit(inline="always")
-def _floor_clamped(v, hi):
-    v = max(-1.0, min(v, float(hi)))
-    i = int(v)
-    return i - 1 if i > v else i
 
 
 @_jit()
@@ -95,53 +79,56 @@ def _rasterize(uv, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_
         iza, izb, izc = iz[ia], iz[ib], iz[ic]
         if iza <= 0.0 or izb <= 0.0 or izc <= 0.0:
             continue
-        ax, ay = uv[ia, 0], uv[ia, 1]
-        bx, by = uv[ib, 0], uv[ib, 1]
-        cx, cy = uv[ic, 0], uv[ic, 1]
+        ua, va, ub, vb, uc, vc = uv[ia, 0], uv[ia, 1], uv[ib, 0], uv[ib, 1], uv[ic, 0], uv[ic, 1]
+        if not (abs(ua) <= MAX_COORD_PX and abs(va) <= MAX_COORD_PX and abs(ub) <= MAX_COORD_PX
+                and abs(vb) <= MAX_COORD_PX and abs(uc) <= MAX_COORD_PX and abs(vc) <= MAX_COORD_PX):
+            continue
+        # Snap to the subpixel grid (as reference.snap): exact integer edge functions from here on.
+        ax, ay = int(np.rint(ua * SUBPIXEL)), int(np.rint(va * SUBPIXEL))
+        bx, by = int(np.rint(ub * SUBPIXEL)), int(np.rint(vb * SUBPIXEL))
+        cx, cy = int(np.rint(uc * SUBPIXEL)), int(np.rint(vc * SUBPIXEL))
         area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-        if cull * area < 0:
+        if area == 0 or cull * area < 0:
             continue
         if area < 0:
             bx, by, cx, cy = cx, cy, bx, by
             izb, izc = izc, izb
             area = -area
-        if not area > 0:
-            continue
-        x0 = max(0, _ceil_clamped(min(ax, min(bx, cx)), w))
-        x1 = min(w - 1, _floor_clamped(max(ax, max(bx, cx)), w))
+        x0 = max(0, -((-min(ax, min(bx, cx))) // SUBPIXEL))
+        x1 = min(w - 1, max(ax, max(bx, cx)) // SUBPIXEL)
         if x1 < x0:
             continue
-        y0 = max(0, _ceil_clamped(min(ay, min(by, cy)), h))
-        y1 = min(h - 1, _floor_clamped(max(ay, max(by, cy)), h))
+        y0 = max(0, -((-min(ay, min(by, cy))) // SUBPIXEL))
+        y1 = min(h - 1, max(ay, max(by, cy)) // SUBPIXEL)
         if y1 < y0:
             continue
-        # Edge functions as in reference._edge: w0 = (cx-bx)(py-by) - (cy-by)(px-bx), etc.
         e0x, e0y = cx - bx, cy - by
         e1x, e1y = ax - cx, ay - cy
         e2x, e2y = bx - ax, by - ay
-        # Top-left rule as one comparison: w >= 0 on edges the triangle owns, w >= the smallest
-        # positive double (i.e. w > 0) on the others.
-        t0 = 0.0 if (e0y < 0 or (e0y == 0 and e0x > 0)) else _TINY
-        t1 = 0.0 if (e1y < 0 or (e1y == 0 and e1x > 0)) else _TINY
-        t2 = 0.0 if (e2y < 0 or (e2y == 0 and e2x > 0)) else _TINY
-        inv_area = 1.0 / area
+        # Top-left rule: w >= 0 on edges the triangle owns, w >= 1 (w > 0) on the others; then one sign
+        # test covers all three: (w0 - t0) | (w1 - t1) | (w2 - t2) >= 0.
+        t0 = 0 if (e0y < 0 or (e0y == 0 and e0x > 0)) else 1
+        t1 = 0 if (e1y < 0 or (e1y == 0 and e1x > 0)) else 1
+        t2 = 0 if (e2y < 0 or (e2y == 0 and e2x > 0)) else 1
+        s0, s1, s2 = e0y * SUBPIXEL, e1y * SUBPIXEL, e2y * SUBPIXEL  # change per pixel step in x
+        inv_area = 1.0 / float(area)
         lab = face_label[f]
+        sx0 = x0 * SUBPIXEL
         for y in range(y0, y1 + 1):
-            py = float(y)
-            r0 = e0x * (py - by)
-            r1 = e1x * (py - cy)
-            r2 = e2x * (py - ay)
+            sy = y * SUBPIXEL
+            w0 = e0x * (sy - by) - e0y * (sx0 - bx)
+            w1 = e1x * (sy - cy) - e1y * (sx0 - cx)
+            w2 = e2x * (sy - ay) - e2y * (sx0 - ax)
             # Branch-free body (selects, no jumps): the inside pattern of tiny triangles is unpredictable.
             for x in range(x0, x1 + 1):
-                px = float(x)
-                w0 = r0 - e0y * (px - bx)
-                w1 = r1 - e1y * (px - cx)
-                w2 = r2 - e2y * (px - ax)
-                inv_z = (w0 * iza + w1 * izb + w2 * izc) * inv_area
+                inv_z = (float(w0) * iza + float(w1) * izb + float(w2) * izc) * inv_area
                 old = zbuf[y, x]
-                closer = (w0 >= t0) & (w1 >= t1) & (w2 >= t2) & (inv_z > old)
+                closer = (((w0 - t0) | (w1 - t1) | (w2 - t2)) >= 0) & (inv_z > old)
                 zbuf[y, x] = inv_z if closer else old
                 labels[y, x] = lab if closer else labels[y, x]
+                w0 -= s0
+                w1 -= s1
+                w2 -= s2
             # Conservative drawn span of the row (the triangle's box), for the statistics pass.
             if x0 < row_lo[y]:
                 row_lo[y] = x0
@@ -201,10 +188,11 @@ def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge
             ymax = max(ymax, uv[v, 1])
     if not xmin <= xmax:
         return
-    tx0 = max(0, _ceil_clamped(xmin, w))
-    tx1 = min(w - 1, _floor_clamped(xmax, w))
-    ty0 = max(0, _ceil_clamped(ymin, h))
-    ty1 = min(h - 1, _floor_clamped(ymax, h))
+    # Any pixel a triangle can touch lies in this box (snapping moves vertices by <= 1/512 px).
+    tx0 = max(0, int(np.floor(max(-1.0, min(xmin, float(w))))))
+    tx1 = min(w - 1, int(np.ceil(max(-1.0, min(xmax, float(w))))))
+    ty0 = max(0, int(np.floor(max(-1.0, min(ymin, float(h))))))
+    ty1 = min(h - 1, int(np.ceil(max(-1.0, min(ymax, float(h))))))
     if tx1 < tx0 or ty1 < ty0:
         return
     for y in range(max(0, ty0 - 1), min(h - 1, ty1 + 1) + 1):
@@ -221,18 +209,20 @@ def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge
     n_off = 0
     sum_edt = 0.0
     for y in range(ty0, ty1 + 1):
+        ym, yp = max(y - 1, 0), min(y + 1, h - 1)  # at the image border the pixel is its own neighbour
         for x in range(row_lo[y], row_hi[y] + 1):  # only the drawn span of the row
             lab = labels[y, x]
             if lab == 0:
                 continue
+            xm, xp = max(x - 1, 0), min(x + 1, w - 1)
             n_t += 1
             n_overlap += sil[y, x]
             sum_di += sil_dt[y, x]
-            if ((y > 0 and labels[y - 1, x] != lab) or (y < h - 1 and labels[y + 1, x] != lab)
-                    or (x > 0 and labels[y, x - 1] != lab) or (x < w - 1 and labels[y, x + 1] != lab)):
-                n_b += 1
-                n_off += edge_off[y, x]
-                sum_edt += edge_dt[y, x]
+            b = ((labels[ym, x] != lab) | (labels[yp, x] != lab) | (labels[y, xm] != lab)
+                 | (labels[y, xp] != lab))
+            n_b += b
+            n_off += b * edge_off[y, x]
+            sum_edt += b * edge_dt[y, x]
             if need_color:
                 s = lab - 1
                 hist_out[s, 0, ab_bins[y, x, 0]] += 1

@@ -2,13 +2,14 @@
 
 Everything the fast path (fast.py) computes is defined here first; tests compare the two.
 
-Rasterisation rules (shared bit for bit with fast.py):
+Rasterisation rules (shared bit for bit with fast.py, which steps the same integers incrementally):
 * pixel (row i, column j) is sampled at its centre, the point (x=j, y=i) of the camera's pixel
   coordinates (OpenCV: (0, 0) is the centre of the top-left pixel);
-* a triangle is the projection of its three (distorted) vertices joined by straight edges; it is
-  skipped if any vertex lies closer than Z_NEAR to the camera plane or if it has zero area;
-* a pixel centre is inside when all three edge functions are positive, or zero on an edge the
-  top-left rule gives to the triangle (so two triangles sharing an edge never both own a pixel);
+* a triangle is the projection of its three (distorted) vertices, snapped to 1/SUBPIXEL px, joined by
+  straight edges; it is skipped if any vertex lies closer than Z_NEAR to the camera plane or if it has
+  zero area;
+* a pixel centre is inside when all three (integer, exact) edge functions are positive, or zero on an
+  edge the top-left rule gives to the triangle (two triangles sharing an edge never both own a pixel);
 * depth test on interpolated 1/z (exact for planar triangles under perspective); ties keep the
   triangle drawn first (lowest index);
 * label image: 0 = background, part index + 1 on the body;
@@ -33,6 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 Z_NEAR = 1e-3  # metres: triangles with a vertex closer to the camera plane are not drawn
+SUBPIXEL = 256  # vertices snap to 1/256 px: edge functions are then exact integers (and so is the top-left rule)
+MAX_COORD_PX = float(1 << 22)  # triangles reaching beyond +-4M px (a vertex almost in the camera plane) are skipped
 N_BINS = 64  # colour histogram bins per channel (eq. 10, K = 64)
 
 TEMPLATE, OVERLAP, SUM_DI, SUM_DT, BOUNDARY, BOUNDARY_OFF, SUM_EDGE_DT = range(7)
@@ -108,8 +111,16 @@ def project_views(vertices, cameras):
     return uv, z
 
 
+def snap(uv):
+    """Pixel coordinates -> integers in 1/SUBPIXEL px (round half to even), and which points are usable
+    (finite and within MAX_COORD_PX)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    ok = np.all(np.abs(uv) <= MAX_COORD_PX, axis=-1)  # also False for NaN
+    return np.rint(np.where(ok[..., None], uv, 0.0) * SUBPIXEL).astype(np.int64), ok
+
+
 def _edge(ax, ay, bx, by, px, py):
-    # Same expression, same operation order as fast.py: results agree to the last bit.
+    """Edge function of a->b at p: positive on the inside of a positively oriented triangle. Exact integers."""
     return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
 
 
@@ -123,37 +134,33 @@ def rasterize(uv, z, faces, face_label, width, height, cull=0):
     """One mesh in one view -> label image (H,W) int16 (0 background, face_label elsewhere).
 
     cull: 0 draws every triangle; +1 / -1 draws only triangles of positive / negative signed image
-    area (back-face culling for a closed mesh whose front faces have that sign; see `front_sign`).
+    area (back-face culling for a closed mesh whose front faces have that sign).
 
     All (triangle, pixel-centre) candidates inside each triangle's bounding box are tested at once;
     the z-buffer keeps, per pixel, the largest 1/z and among equals the lowest triangle index.
     """
-    uv = np.asarray(uv, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     labels = np.zeros((height, width), dtype=np.int16)
     if len(faces) == 0:
         return labels
-    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    q, usable = snap(uv)
+    a, b, c = q[faces[:, 0]], q[faces[:, 1]], q[faces[:, 2]]
     za, zb, zc = z[faces[:, 0]], z[faces[:, 1]], z[faces[:, 2]]
-    area = _edge(a[:, 0], a[:, 1], b[:, 0], b[:, 1], c[:, 0], c[:, 1])
+    area = _edge(a[:, 0], a[:, 1], b[:, 0], b[:, 1], c[:, 0], c[:, 1])  # twice the area, in subpixel units^2
     facing = cull * area >= 0
     flip = area < 0  # make every triangle positively oriented: swap b and c
-    b2 = np.where(flip[:, None], c, b)
-    c2 = np.where(flip[:, None], b, c)
-    zb2 = np.where(flip, zc, zb)
-    zc2 = np.where(flip, zb, zc)
-    b, c, zb, zc, area = b2, c2, zb2, zc2, np.abs(area)
+    b, c = np.where(flip[:, None], c, b), np.where(flip[:, None], b, c)
+    zb, zc = np.where(flip, zc, zb), np.where(flip, zb, zc)
+    area = np.abs(area)
     xs = np.stack([a[:, 0], b[:, 0], c[:, 0]], axis=1)
     ys = np.stack([a[:, 1], b[:, 1], c[:, 1]], axis=1)
-    with np.errstate(invalid="ignore"):
-        x0 = np.ceil(np.clip(xs.min(axis=1), -1.0, width)).astype(np.int64)
-        x1 = np.floor(np.clip(xs.max(axis=1), -1.0, width)).astype(np.int64)
-        y0 = np.ceil(np.clip(ys.min(axis=1), -1.0, height)).astype(np.int64)
-        y1 = np.floor(np.clip(ys.max(axis=1), -1.0, height)).astype(np.int64)
-    x0, y0 = np.maximum(x0, 0), np.maximum(y0, 0)
-    x1, y1 = np.minimum(x1, width - 1), np.minimum(y1, height - 1)
-    ok = facing & (np.minimum(np.minimum(za, zb), zc) > Z_NEAR) & (area > 0) & np.isfinite(area) & (x1 >= x0) & (y1 >= y0)
+    x0 = np.maximum(-((-xs.min(axis=1)) // SUBPIXEL), 0)  # first pixel centre at or right of the box
+    x1 = np.minimum(xs.max(axis=1) // SUBPIXEL, width - 1)
+    y0 = np.maximum(-((-ys.min(axis=1)) // SUBPIXEL), 0)
+    y1 = np.minimum(ys.max(axis=1) // SUBPIXEL, height - 1)
+    drawable = usable[faces].all(axis=1) & (np.minimum(np.minimum(za, zb), zc) > Z_NEAR)
+    ok = facing & drawable & (area > 0) & (x1 >= x0) & (y1 >= y0)
     tri = np.nonzero(ok)[0]
     if tri.size == 0:
         return labels
@@ -162,18 +169,20 @@ def rasterize(uv, z, faces, face_label, width, height, cull=0):
     t = np.repeat(tri, counts)
     local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
     nxt = np.repeat(nx, counts)
-    px = (x0[t] + local % nxt).astype(np.float64)
-    py = (y0[t] + local // nxt).astype(np.float64)
+    px = x0[t] + local % nxt
+    py = y0[t] + local // nxt
+    sx, sy = px * SUBPIXEL, py * SUBPIXEL
     ax_, ay_, bx_, by_, cx_, cy_ = a[t, 0], a[t, 1], b[t, 0], b[t, 1], c[t, 0], c[t, 1]
-    w0 = _edge(bx_, by_, cx_, cy_, px, py)  # weight of a
-    w1 = _edge(cx_, cy_, ax_, ay_, px, py)  # weight of b
-    w2 = _edge(ax_, ay_, bx_, by_, px, py)  # weight of c
-    inside = (((w0 > 0) | ((w0 == 0) & _owns_zero_edge(bx_, by_, cx_, cy_)))
-              & ((w1 > 0) | ((w1 == 0) & _owns_zero_edge(cx_, cy_, ax_, ay_)))
-              & ((w2 > 0) | ((w2 == 0) & _owns_zero_edge(ax_, ay_, bx_, by_))))
-    t, px, py = t[inside], px[inside].astype(np.int64), py[inside].astype(np.int64)
-    w0, w1, w2 = w0[inside], w1[inside], w2[inside]
-    inv_z = (w0 * (1.0 / za[t]) + w1 * (1.0 / zb[t]) + w2 * (1.0 / zc[t])) * (1.0 / area[t])
+    w0 = _edge(bx_, by_, cx_, cy_, sx, sy)  # weight of a
+    w1 = _edge(cx_, cy_, ax_, ay_, sx, sy)  # weight of b
+    w2 = _edge(ax_, ay_, bx_, by_, sx, sy)  # weight of c
+    inside = ((w0 >= np.where(_owns_zero_edge(bx_, by_, cx_, cy_), 0, 1))
+              & (w1 >= np.where(_owns_zero_edge(cx_, cy_, ax_, ay_), 0, 1))
+              & (w2 >= np.where(_owns_zero_edge(ax_, ay_, bx_, by_), 0, 1)))
+    t, px, py = t[inside], px[inside], py[inside]
+    w0, w1, w2 = w0[inside].astype(np.float64), w1[inside].astype(np.float64), w2[inside].astype(np.float64)
+    # Interpolated 1/z, the same float operations in the same order as fast.py.
+    inv_z = (w0 * (1.0 / za[t]) + w1 * (1.0 / zb[t]) + w2 * (1.0 / zc[t])) * (1.0 / area[t].astype(np.float64))
     pixel = py * width + px
     order = np.lexsort((t, -inv_z, pixel))  # per pixel: nearest first, then lowest triangle index
     pixel, t = pixel[order], t[order]
