@@ -270,3 +270,37 @@ def test_frame_targets_reject_mismatched_shapes():
 def test_unknown_backend_is_rejected_with_the_choices():
     with pytest.raises(ValueError, match="numpy"):
         render.resolve_backend("gpu")
+
+
+_PROBE = """
+import importlib, sys
+import numpy as np
+fast = importlib.import_module(sys.argv[1] + ".core.render.fast")
+ref = importlib.import_module(sys.argv[1] + ".core.render.reference")
+uv = np.array([[[[2.5, 2.5], [9.5, 2.5], [9.5, 7.5], [2.5, 7.5]]]])
+z = np.full((1, 1, 4), 2.0)
+t = ref.FrameTargets([12], [10], np.zeros((1, 10, 12)), np.zeros((1, 10, 12)), np.ones((1, 10, 12)),
+                     np.zeros((1, 10, 12)), np.zeros((1, 10, 12, 2)))
+stats, _ = fast.statistics(uv, z, np.array([[0, 1, 2], [0, 2, 3]]), np.array([1, 1]), t)
+assert stats[0, 0, 0] == 35, stats
+"""
+
+
+@pytest.mark.slow
+def test_jit_cache_works_when_the_package_is_imported_under_two_names(tmp_path):
+    # The CLI imports `markerless_mocap`, Blender `bl_ext.<repo>.markerless_mocap`: numba's cached code names
+    # its module, so each name needs its own cache (else: ModuleNotFoundError on the second name).
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    probe = tmp_path / "probe.py"
+    probe.write_text(_PROBE)
+    for name in ("markerless_mocap", "mocap_cache_probe"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / name).symlink_to(repo, target_is_directory=True)
+    for name in ("markerless_mocap", "mocap_cache_probe", "markerless_mocap", "mocap_cache_probe"):
+        run = subprocess.run([sys.executable, str(probe), name], cwd=tmp_path / name, capture_output=True, text=True,
+                             env={**__import__("os").environ, "PYTHONPATH": str(tmp_path / name)}, timeout=300)
+        assert run.returncode == 0, run.stderr[-2000:]
