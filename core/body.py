@@ -63,6 +63,10 @@ class Skeleton:
         has_parent = self.parents >= 0
         rel[has_parent] = inv_rest[self.parents[has_parent]] @ self.rest[has_parent]
         self.rest_relative = rel
+        A_lin = self.armature_matrix[:3, :3]
+        self.armature_scale = float(np.cbrt(np.linalg.det(A_lin)))
+        self.armature_rotation = A_lin / self.armature_scale
+        self.armature_inverse = np.linalg.inv(self.armature_matrix)
 
     @property
     def n_bones(self):
@@ -193,19 +197,16 @@ class Body:
 
     def _root_basis(self, poses, root_anchor):
         sk, r = self.skeleton, self.root_bone
-        A = sk.armature_matrix
-        A_lin = A[:3, :3]
-        scale = np.cbrt(np.linalg.det(A_lin))
-        A_rot = A_lin / scale
         rest_rot = sk.rest[r, :3, :3]
-        world_rest_rot = A_rot @ rest_rot  # world orientation of the root bone at rest
+        world_rest_rot = sk.armature_rotation @ rest_rot  # world orientation of the root bone at rest
         anchor = np.eye(3) if root_anchor is None else np.asarray(root_anchor, dtype=np.float64)
         R_world = rotvec_to_matrix(poses[:, self.root_rotation_dofs]) @ anchor  # (P,3,3)
         # world rotation = R_world @ world_rest_rot = A_rot @ rest_rot @ R_basis
         R_basis = world_rest_rot.T @ R_world @ world_rest_rot
         # world head = A @ (rest_head + rest_rot @ loc)  ->  loc = rest_rot^T (A^-1 t - rest_head)
         t = poses[:, self.translation_dofs]
-        t_arm = (np.linalg.inv(A) @ np.concatenate([t, np.ones((len(t), 1))], axis=1).T).T[:, :3]
+        A_inv = sk.armature_inverse
+        t_arm = t @ A_inv[:3, :3].T + A_inv[:3, 3]
         loc = (t_arm - sk.rest[r, :3, 3]) @ rest_rot  # row-vector form of rest_rot^T @ v
         out = np.broadcast_to(np.eye(4), (len(poses), 4, 4)).copy()
         out[:, :3, :3] = R_basis

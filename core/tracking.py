@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .features import BackgroundModel, compute_view_features
+from .likelihood import default_pose_at
 from .optimizers import PoseSpace, make_optimizer
 from .proxy import make_proxy
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
@@ -62,7 +63,7 @@ class FrameEstimate:
 class Tracker:
     """Tracks one subject through a capture. Call `initialise` once, then `track(frame)` per frame."""
 
-    def __init__(self, body, capture, settings=None, prior=None, proxy=None, energy_model=None):
+    def __init__(self, body, capture, settings=None, prior=None, proxy=None, energy_model=None, dynamics=None):
         from .likelihood import EnergyModel  # heavy (numba): import when a tracker is made
 
         self.body = body
@@ -73,6 +74,7 @@ class Tracker:
         self.energy = energy_model or EnergyModel(body, self.proxy, capture.cameras, self.settings.likelihood,
                                                   prior=prior, backend=self.settings.backend, **kwargs)
         self.scale = self.energy.scale
+        self.dynamics = dynamics
         self.backgrounds = self._background_models()
         self.space = PoseSpace.with_default_scale(body.lower, body.upper, body.dof_names,
                                                   np.isin(np.arange(body.n_dof), body.translation_dofs))
@@ -87,6 +89,8 @@ class Tracker:
         kw = dict(self.settings.optimizer_options)
         if self.settings.algorithm in ("isa", "apf"):
             kw.setdefault("n", self.settings.particles)
+        if self.settings.algorithm in ("pf", "fsa") and self.dynamics is not None:
+            kw.setdefault("dynamics", self.dynamics)
         return kw
 
     def _background_models(self):
@@ -109,8 +113,12 @@ class Tracker:
     def features(self, frame):
         images = self.capture.frames.read(frame)
         return [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
-                                      diffuse=self.energy.weights.color > 0)
+                                      diffuse=self.uses_color)
                 for cam in self.capture.cameras]
+
+    @property
+    def uses_color(self):
+        return self.energy.weights.color > 0
 
     # ------------------------------------------------------------------ root anchoring
     def to_absolute(self, poses):
@@ -162,7 +170,7 @@ class Tracker:
         rough = body.default_pose() if rough_pose is None else np.asarray(rough_pose, float)
         self.anchor = rotvec_to_matrix(rough[body.root_rotation_dofs])
         feats = self.features(frame)
-        self.energy.set_reference_pose(rough)
+        self.energy.set_reference_pose(default_pose_at(body, rough))
         self.energy.set_frame(feats)
         if initial_pose is None:
             from .optimizers.isa import InteractingSimulatedAnnealing
@@ -181,7 +189,7 @@ class Tracker:
             pose = np.asarray(initial_pose, float)
             evaluations = 0
         energy = float(self.energy(pose[None])[0])
-        if self.energy.weights.color > 0:
+        if self.uses_color:
             self.energy.init_color_model(pose)
         self.optimizer.start(self.to_relative(pose))
         return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
@@ -196,8 +204,8 @@ class Tracker:
         result = self.optimizer.track_frame(self._energy_fn, list(self.history))
         pose = self.to_absolute(result.estimate)
         lam = self.settings.color_adaptation
-        lam = self.energy.weights.color_adaptation if lam is None else lam
-        if self.energy.weights.color > 0 and lam > 0:
+        lam = self.energy.weights.adaptation if lam is None else lam
+        if self.uses_color and lam > 0:
             self.energy.adapt_color_model(pose, lam)
         est = self._record(frame, pose, result.energy, time.perf_counter() - t0, result.evaluations)
         self._reanchor(self.history[-1])
@@ -223,17 +231,15 @@ class Tracker:
     def state(self):
         """Everything needed to continue exactly where this tracker stands (picklable)."""
         return {"optimizer": self.optimizer, "anchor": self.anchor, "history": self.history,
-                "color_model": self.energy.color_state() if hasattr(self.energy, "color_state") else None,
-                "reference_pose": getattr(self.energy, "reference_pose", None)}
+                "color_model": (self.energy.color_model, self.energy.color_count),
+                "reference": (self.energy.reference_area, self.energy.reference_boundary)}
 
     def restore(self, state):
         self.optimizer = state["optimizer"]
         self.anchor = state["anchor"]
         self.history = list(state["history"])
-        if state.get("reference_pose") is not None:
-            self.energy.set_reference_pose(state["reference_pose"])
-        if state.get("color_model") is not None:
-            self.energy.set_color_state(state["color_model"])
+        self.energy.reference_area, self.energy.reference_boundary = state["reference"]
+        self.energy.color_model, self.energy.color_count = state["color_model"]
 
 
 def run_tracker(tracker, frames, initial_pose=None, rough_pose=None, on_frame=None, should_stop=None):

@@ -53,7 +53,7 @@ def _rows(spec):
 def run(args):
     from ..addon.scene_bridge import body_from_blender, find_armature
     from ..core.capture.capture import load_capture
-    from .track_session import build_prior
+    from .track_session import build_motion_models
 
     capture_dir = args.capture
     scene = open_subject(args.scene or capture_dir / "subject.blend")
@@ -63,7 +63,7 @@ def run(args):
     frames = list(parse_frames(args.frames) or range(capture.frames.n_frames))
     seeds = [int(s) for s in args.seeds.split(",")]
     rows = _rows(args.rows)
-    prior = build_prior(body)
+    prior, dynamics = build_motion_models(body, capture_dir, capture.frames.fps)
     budget = args.particles * args.iterations
     # One common initial pose per seed (the paper: "the same initial pose is used for all approaches").
     init = {}
@@ -72,7 +72,7 @@ def run(args):
         for seed in seeds:
             settings = TrackingSettings(algorithm=algo, likelihood=lik, particles=args.particles,
                                         iterations=args.iterations, seed=seed, backend=args.backend)
-            tracker = Tracker(body, capture, settings, prior=prior)
+            tracker = Tracker(body, capture, settings, prior=prior, dynamics=dynamics)
             if seed not in init:
                 init_settings = TrackingSettings(likelihood="silh+edge", seed=seed, backend=args.backend)
                 init_tracker = Tracker(body, capture, init_settings, prior=prior, proxy=tracker.proxy)

@@ -64,7 +64,8 @@ def build_session(context, log=None):
     settings.backend = effective_backend(context, props.backend)
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
     return _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
-                            frames=props.frame_range(), resume=props.resume, log=log)
+                            frames=props.frame_range(), resume=props.resume, log=log,
+                            units=None if props.units == "auto" else props.units)
 
 
 class TrackJob:

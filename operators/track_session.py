@@ -16,29 +16,23 @@ from ..core.results import ResultWriter
 from ..core.tracking import Tracker, TrackingSettings
 
 
-def training_clips():
-    """Bundled CMU clips for the anatomical prior (see core/data/motion/SOURCE.txt)."""
-    from ..core.mocap.bvh import read_bvh
+def build_motion_models(body, capture_folder, fps, seed=0):
+    """Anatomical prior + AR(3) dynamics from the bundled CMU clips, leaving out the clip window a
+    bundled sample scene was made from."""
+    from ..core.motion_library import build_motion_models as build, scene_exclusion
 
-    folder = Path(__file__).resolve().parents[1] / "core" / "data" / "motion"
-    return [read_bvh(p) for p in sorted(folder.glob("*.bvh"))]
-
-
-def build_prior(body, seed=0, exclude=None):
-    from ..core.prior import AnatomicalPrior
-
-    return AnatomicalPrior.from_motion(body, training_clips(), seed=seed, exclude=exclude)
+    return build(body, fps=fps, exclude=scene_exclusion(capture_folder), seed=seed)
 
 
 class TrackSession:
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 mesh_obj=None, frame_offset=None, prior=None, log=None):
+                 mesh_obj=None, frame_offset=None, prior=None, log=None, units=None):
         self.scene = scene
         self.armature = armature_obj
         self.settings = settings or TrackingSettings()
         self.log = log or (lambda msg: None)
         self.body = scene_bridge.body_from_blender(armature_obj, mesh_obj, scene)
-        self.capture = load_capture(capture_dir)
+        self.capture = load_capture(capture_dir, units=units)
         n = self.capture.frames.n_frames
         self.all_frames = list(range(n)) if frames is None else [f for f in frames if 0 <= f < n]
         if not self.all_frames:
@@ -46,8 +40,13 @@ class TrackSession:
                              f"{frames[0]}-{frames[-1]}" if frames else "the capture has no frames")
         self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
         self.rough_pose = self.body.default_pose()  # the subject as the user placed it
-        self.prior = prior if prior is not None else build_prior(self.body, self.settings.seed)
-        self.tracker = Tracker(self.body, self.capture, self.settings, prior=self.prior)
+        if prior is None:
+            self.log("preparing the anatomical prior and dynamics for this rig (cached after the first run)")
+            prior, dynamics = build_motion_models(self.body, capture_dir, self.capture.frames.fps, self.settings.seed)
+        else:
+            dynamics = None
+        self.prior = prior
+        self.tracker = Tracker(self.body, self.capture, self.settings, prior=prior, dynamics=dynamics)
         self.writer = ResultWriter(out_dir, self.body, self.settings, info={
             "capture": str(Path(capture_dir).resolve()), "armature": armature_obj.name,
             "cameras": [c.name for c in self.capture.cameras], "energy_scale": self.tracker.scale,

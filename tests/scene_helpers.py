@@ -1,0 +1,42 @@
+"""Helpers for tests on the bundled sample scenes: subject body, capture, ground-truth poses."""
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SCENES = REPO / "sample_scenes"
+
+
+def scene_dir(name="walk"):
+    return SCENES / name
+
+
+def load_scene_body(bpy, name="walk"):
+    """(body, armature object) of the scene's subject.blend."""
+    from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
+
+    bpy.ops.wm.open_mainfile(filepath=str(scene_dir(name) / "subject.blend"))
+    arm = find_armature(bpy.context.scene)
+    return body_from_blender(arm, None, bpy.context.scene), arm
+
+
+@lru_cache(maxsize=4)
+def ground_truth_poses(name="walk"):
+    """Ground-truth joints as DOF vectors of the subject (fitted to every bone head)."""
+    import bpy
+
+    from markerless_mocap.core.pose_fitting import fit_pose_sequence
+    from markerless_mocap.core.results import load_joints
+
+    body, _ = load_scene_body(bpy, name)
+    names, frames, positions = load_joints(scene_dir(name) / "gt_joints.npz")
+    order = [names.index(n) for n in body.skeleton.bone_names]
+    poses, residual = fit_pose_sequence(body, positions[:, order])
+    return body, frames, poses, residual
+
+
+def mean_joint_error(body, poses, truth_poses):
+    a = body.joint_positions(np.atleast_2d(poses))
+    b = body.joint_positions(np.atleast_2d(truth_poses))
+    return float(np.linalg.norm(a - b, axis=-1).mean())
