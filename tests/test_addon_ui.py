@@ -212,9 +212,10 @@ class FakeSession:
     block_at = None  # index of the frame whose solve waits for `release`
 
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 log=None):
+                 log=None, units=None):
         FakeSession.last = self
-        self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume)
+        self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume,
+                         units=units)
         self.scene, self.armature = scene, armature_obj
         self.frames = list(frames) if frames is not None else [0, 1, 2]
         self.n_total = len(self.frames)
