@@ -40,27 +40,38 @@ class TrackSession:
                              f"{frames[0]}-{frames[-1]}" if frames else "the capture has no frames")
         self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
         self.rough_pose = self.body.default_pose()  # the subject as the user placed it
-        if prior is None:
-            self.log("preparing the anatomical prior and dynamics for this rig (cached after the first run)")
-            prior, dynamics = build_motion_models(self.body, capture_dir, self.capture.frames.fps, self.settings.seed)
-        else:
-            dynamics = None
-        self.prior = prior
-        self.tracker = Tracker(self.body, self.capture, self.settings, prior=prior, dynamics=dynamics)
+        self.capture_dir = capture_dir
+        self.prior, self.dynamics = prior, None
+        self.tracker = None  # built by the first solve_next(), off the main thread (the prior takes a while)
         self.writer = ResultWriter(out_dir, self.body, self.settings, info={
             "capture": str(Path(capture_dir).resolve()), "armature": armature_obj.name,
-            "cameras": [c.name for c in self.capture.cameras], "energy_scale": self.tracker.scale,
-            "preset": self.body.preset, "dof_names": self.body.dof_names})
+            "cameras": [c.name for c in self.capture.cameras], "preset": self.body.preset,
+            "dof_names": self.body.dof_names})
         self.frames = list(self.all_frames)
+        self._resume_state = None
         if resume:
             done, state = self.writer.load_checkpoint()
             if done:
-                self.tracker.restore(state)
-                self.tracker.estimates = list(done)
+                self._resume_state = state
                 solved = {e.frame for e in done}
                 self.frames = [f for f in self.all_frames if f not in solved]
                 self.log(f"resuming after frame {done[-1].frame}: {len(done)} frames already solved")
         self._cancel = threading.Event()
+
+    def prepare(self):
+        """Build the prior, dynamics and tracker (engine only; safe off the main thread)."""
+        if self.tracker is not None:
+            return self.tracker
+        if self.prior is None:
+            self.log("preparing the anatomical prior and dynamics for this rig (cached after the first run)")
+            self.prior, self.dynamics = build_motion_models(self.body, self.capture_dir, self.capture.frames.fps,
+                                                            self.settings.seed)
+        self.tracker = Tracker(self.body, self.capture, self.settings, prior=self.prior, dynamics=self.dynamics)
+        self.writer.info["energy_scale"] = self.tracker.scale
+        if self._resume_state is not None:
+            self.tracker.restore(self._resume_state)
+            self.tracker.estimates = list(self.writer.estimates)
+        return self.tracker
 
     @property
     def n_total(self):
@@ -81,6 +92,7 @@ class TrackSession:
         """Solve the next frame (engine only, no bpy). Returns its FrameEstimate, or None when done."""
         if not self.frames or self.cancelled:
             return None
+        self.prepare()
         frame = self.frames.pop(0)
         if not self.writer.estimates:
             est = self.tracker.initialise(frame, rough_pose=self.rough_pose)
@@ -128,7 +140,7 @@ class TrackSession:
     def write_overlays(self):
         from ..core.overlay import OverlayWriter
 
-        proxy = self.tracker.proxy
+        proxy = self.prepare().proxy
         writer = OverlayWriter(self.writer.out, self.capture.cameras, self.capture.frames.fps)
         try:
             for est in self.writer.estimates:
