@@ -58,10 +58,11 @@ class AnnealedParticleFilter(Optimizer):
     def __init__(self, space: PoseSpace, budget: int | None = None, seed: int = 0, *, n: int = 200,
                  M: int | None = None, alpha: float = 0.5, covariance: str = "adaptive", sigma_floor=None,
                  sigma_pred=None, p0_scale: float = 1.0, resampling: str = "multinomial",
-                 estimate: str = "mean", init_spread: float = 0.5, **params):
+                 estimate: str = "mean", init_spread: float = 0.5, velocity: bool = False, **params):
         super().__init__(space, budget, seed, **params)
         if n < 2:
             raise OptimizerInputError(f"APF needs at least 2 particles, got n={n}")
+        self.velocity = bool(velocity)
         self.n = int(n)
         if M is None:
             self.M = split_budget(self.budget, self.n, "APF")
@@ -107,6 +108,8 @@ class AnnealedParticleFilter(Optimizer):
 
     def _search(self, energy: CountingEnergy, history):
         X, pi = self.state if self.state is not None else self._initial_set(history)
+        if self.state is not None and self.velocity and len(history) >= 2:
+            X = X + (history[-1] - history[-2])  # same constant-velocity shift as ISA's option
         resample = RESAMPLERS[self.resampling]
         floor_cov = np.diag(self.sigma_floor ** 2)
         betas, rates, unsolved = [], [], 0
