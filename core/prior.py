@@ -68,15 +68,21 @@ class AnatomicalPrior:
         return cls(groups, sub, {g: second_neighbour_bandwidth(s) for g, s in sub.items()}, y.shape[1])
 
     @classmethod
-    def from_motion(cls, body, clips, n_samples=200, seed=0):
-        """Train on motion clips (core.mocap MotionClip) mapped into the body's DOF (core.motion_to_dof)."""
+    def from_motion(cls, body, clips, n_samples=200, seed=0, oversample=2):
+        """Train on motion clips (core.mocap MotionClip) mapped into the body's DOF (core.motion_to_dof).
+
+        Only `oversample` x n_samples frames, spread evenly in time over the clips, are mapped (fitting
+        every frame of long clips is slow); `fit` then draws the n_samples training poses from them.
+        """
         from .motion_to_dof import dof_sequence_from_clip
 
         if not clips:
             raise PriorError("no motion clips to train the anatomical prior on")
+        per_clip = int(np.ceil(oversample * n_samples / len(clips)))
         poses = []
         for clip in clips:
-            result = dof_sequence_from_clip(body, clip)
+            frames = np.unique(np.linspace(0, clip.n_frames - 1, min(per_clip, clip.n_frames)).round().astype(int))
+            result = dof_sequence_from_clip(body, clip, frames=frames)
             poses.append(np.asarray(result[0] if isinstance(result, tuple) else result))
         return cls.fit(np.concatenate(poses), body.prior_groups, n_samples, seed)
 

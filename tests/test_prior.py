@@ -91,3 +91,31 @@ def test_bad_training_data_and_files_give_clear_errors(tmp_path):
     np.savez(bad, something=np.zeros(3))
     with pytest.raises(PriorError, match="not a saved anatomical prior"):
         AnatomicalPrior.load(bad)
+
+
+def test_from_motion_maps_frames_spread_over_every_clip(monkeypatch):
+    from markerless_mocap.core import motion_to_dof
+
+    class Clip:
+        def __init__(self, n, offset):
+            self.n_frames, self.offset = n, offset
+
+    class Body:
+        prior_groups = {"head": [1, 2], "upper": [3, 4, 5], "lower": [6]}
+
+    asked = []
+
+    def fake_sequence(body, clip, frames=None, name_map=None):
+        asked.append((clip.offset, np.asarray(frames)))
+        f = np.asarray(frames, float)[:, None]
+        poses = clip.offset + np.sin(f * np.arange(1, 8) * 0.37)  # a distinct pose per frame
+        return poses, np.zeros(len(f))
+
+    monkeypatch.setattr(motion_to_dof, "dof_sequence_from_clip", fake_sequence)
+    prior = AnatomicalPrior.from_motion(Body(), [Clip(1000, 0.0), Clip(50, 10.0)], n_samples=40, seed=0)
+    (o1, f1), (o2, f2) = asked
+    assert len(f1) == 40 and f1[0] == 0 and f1[-1] == 999  # 2 x 40 / 2 clips, first to last frame
+    assert np.array_equal(f2, np.unique(np.linspace(0, 49, 40).round().astype(int)))
+    assert all(len(s) == 40 for s in prior.samples.values())
+    # Samples come from both clips (the second clip's poses are offset by 10).
+    assert (prior.samples["lower"] > 5).any() and (prior.samples["lower"] < 5).any()
