@@ -174,6 +174,16 @@ def test_project_views_matches_camera_projection_with_distortion():
         ref_uv, ref_z = cam.project_with_depth(pts)
         assert np.allclose(uv[:, c], ref_uv, atol=1e-9)
         assert np.allclose(z[:, c], ref_z, atol=1e-12)
+    # The numba projection returns the same points snapped to the subpixel grid (summation order may move
+    # a point that sits on a rounding boundary by one subpixel), and 1/z.
+    pts[0, 0] = [3, 0, 0.5]  # at camera a's centre: not drawable there
+    uv, z = render.project_views(pts, cams)
+    q_ref, usable = reference.snap(uv)
+    q, iz = fast.project_views(pts, cams)
+    drawable = usable & (z > reference.Z_NEAR)
+    assert np.abs(q - q_ref)[drawable].max() <= 1
+    assert np.allclose(iz[drawable], 1 / z[drawable], rtol=1e-14)
+    assert np.all(iz[~drawable] == 0) and not drawable[0, 0, 0]
 
 
 # ---------------------------------------------------------------------------------------- statistics

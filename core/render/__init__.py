@@ -47,8 +47,8 @@ def measure_vertices(vertices, cameras, faces, face_label, targets, need_chamfer
     """Posed vertices (P,V,3) -> projection into every camera -> `statistics` (fast path: both in numba)."""
     if resolve_backend(backend) == "fast":
         from . import fast
-        uv, iz = fast.project_views(vertices, cameras)
-        return fast.statistics_from_inverse_depth(uv, iz, faces, face_label, targets, need_chamfer, n_parts, cull)
+        q, iz = fast.project_views(vertices, cameras)
+        return fast.statistics_from_snapped(q, iz, faces, face_label, targets, need_chamfer, n_parts, cull)
     uv, z = project_views(vertices, cameras)
     return reference.statistics(uv, z, faces, face_label, targets, need_chamfer, n_parts, cull)
 

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from .reference import (BOUNDARY, BOUNDARY_OFF, MAX_COORD_PX, N_BINS, N_STATS, OVERLAP, SUBPIXEL, SUM_DI, SUM_DT,
-                        SUM_EDGE_DT, TEMPLATE, Z_NEAR, FrameTargets)
+                        SUM_EDGE_DT, TEMPLATE, Z_NEAR, FrameTargets, snap)
 
 _BIG = 1 << 40
 
@@ -72,21 +72,15 @@ def _jit(**options):
 
 
 @_jit()
-def _rasterize(uv, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi):
-    """Draw one mesh into labels/zbuf (zero over the template box); widen each row's span to cover it."""
+def _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi):
+    """Draw one mesh (vertices snapped to 1/SUBPIXEL px, `q`; iz = 0 marks unusable vertices) into
+    labels/zbuf (zero over the template box); widen each row's span to cover what it draws."""
     for f in range(faces.shape[0]):
         ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
         iza, izb, izc = iz[ia], iz[ib], iz[ic]
         if iza <= 0.0 or izb <= 0.0 or izc <= 0.0:
             continue
-        ua, va, ub, vb, uc, vc = uv[ia, 0], uv[ia, 1], uv[ib, 0], uv[ib, 1], uv[ic, 0], uv[ic, 1]
-        if not (abs(ua) <= MAX_COORD_PX and abs(va) <= MAX_COORD_PX and abs(ub) <= MAX_COORD_PX
-                and abs(vb) <= MAX_COORD_PX and abs(uc) <= MAX_COORD_PX and abs(vc) <= MAX_COORD_PX):
-            continue
-        # Snap to the subpixel grid (as reference.snap): exact integer edge functions from here on.
-        ax, ay = int(np.rint(ua * SUBPIXEL)), int(np.rint(va * SUBPIXEL))
-        bx, by = int(np.rint(ub * SUBPIXEL)), int(np.rint(vb * SUBPIXEL))
-        cx, cy = int(np.rint(uc * SUBPIXEL)), int(np.rint(vc * SUBPIXEL))
+        ax, ay, bx, by, cx, cy = q[ia, 0], q[ia, 1], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1]
         area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
         if area == 0 or cull * area < 0:
             continue
@@ -176,23 +170,23 @@ def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt):
 
 
 @_jit()
-def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_dt, ab_bins, obox,
+def _one_task(q, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_dt, ab_bins, obox,
               need_chamfer, need_color, labels, zbuf, dt, row_lo, row_hi, stats_out, hist_out):
-    # Template box from the vertices in front of the camera.
-    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
-    for v in range(uv.shape[0]):
+    # Template box: the pixel centres the usable vertices span (every drawn pixel lies inside).
+    big = 1 << 62
+    xmin, xmax, ymin, ymax = big, -big, big, -big
+    for v in range(q.shape[0]):
         if iz[v] > 0.0:
-            xmin = min(xmin, uv[v, 0])
-            xmax = max(xmax, uv[v, 0])
-            ymin = min(ymin, uv[v, 1])
-            ymax = max(ymax, uv[v, 1])
-    if not xmin <= xmax:
+            xmin = min(xmin, q[v, 0])
+            xmax = max(xmax, q[v, 0])
+            ymin = min(ymin, q[v, 1])
+            ymax = max(ymax, q[v, 1])
+    if xmin > xmax:
         return
-    # Any pixel a triangle can touch lies in this box (snapping moves vertices by <= 1/512 px).
-    tx0 = max(0, int(np.floor(max(-1.0, min(xmin, float(w))))))
-    tx1 = min(w - 1, int(np.ceil(max(-1.0, min(xmax, float(w))))))
-    ty0 = max(0, int(np.floor(max(-1.0, min(ymin, float(h))))))
-    ty1 = min(h - 1, int(np.ceil(max(-1.0, min(ymax, float(h))))))
+    tx0 = max(0, -((-xmin) // SUBPIXEL))
+    tx1 = min(w - 1, xmax // SUBPIXEL)
+    ty0 = max(0, -((-ymin) // SUBPIXEL))
+    ty1 = min(h - 1, ymax // SUBPIXEL)
     if tx1 < tx0 or ty1 < ty0:
         return
     for y in range(max(0, ty0 - 1), min(h - 1, ty1 + 1) + 1):
@@ -201,7 +195,7 @@ def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge
         for x in range(max(0, tx0 - 1), min(w - 1, tx1 + 1) + 1):
             labels[y, x] = 0
             zbuf[y, x] = 0.0
-    _rasterize(uv, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi)
+    _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi)
     n_t = 0
     n_overlap = 0
     sum_di = 0.0
@@ -238,9 +232,9 @@ def _one_task(uv, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge
 
 
 @_jit(parallel=True)
-def _statistics_kernel(uv, iz, faces, face_label, cull, widths, heights, sil, sil_dt, edge_off, edge_dt, ab_bins,
+def _statistics_kernel(q, iz, faces, face_label, cull, widths, heights, sil, sil_dt, edge_off, edge_dt, ab_bins,
                        obox, need_chamfer, need_color, n_chunks, stats, hist):
-    P, C = uv.shape[0], uv.shape[1]
+    P, C = q.shape[0], q.shape[1]
     H, W = sil.shape[1], sil.shape[2]
     n_tasks = P * C
     for chunk in prange(n_chunks):
@@ -253,22 +247,23 @@ def _statistics_kernel(uv, iz, faces, face_label, cull, widths, heights, sil, si
         for task in range(chunk, n_tasks, n_chunks):
             p = task // C
             c = task % C
-            _one_task(uv[p, c], iz[p, c], faces, face_label, cull, widths[c], heights[c], sil[c], sil_dt[c],
+            _one_task(q[p, c], iz[p, c], faces, face_label, cull, widths[c], heights[c], sil[c], sil_dt[c],
                       edge_off[c], edge_dt[c], ab_bins[c], obox[c], need_chamfer, need_color, labels, zbuf, dt,
                       row_lo, row_hi, stats[p, c], hist[p, c])
 
 
 def statistics(uv, z, faces, face_label, targets: FrameTargets, need_chamfer=True, n_parts=0, cull=0):
     """Fast path with the reference's signature and results: (P,C,N_STATS) and (P,C,S,2,K)."""
+    q, usable = snap(uv)
     z = np.asarray(z, dtype=np.float64)
     with np.errstate(divide="ignore"):
-        iz = np.where(z > Z_NEAR, 1.0 / z, 0.0)  # 0 marks "do not draw"
-    return statistics_from_inverse_depth(uv, iz, faces, face_label, targets, need_chamfer, n_parts, cull)
+        iz = np.where(usable & (z > Z_NEAR), 1.0 / z, 0.0)  # 0 marks "do not draw"
+    return statistics_from_snapped(q, iz, faces, face_label, targets, need_chamfer, n_parts, cull)
 
 
 # ---------------------------------------------------------------------------------------- projection
 @_jit(parallel=True)
-def _project_kernel(vertices, R, t, K, dist, has_dist, uv, iz):
+def _project_kernel(vertices, R, t, K, dist, has_dist, q, iz):
     P, V = vertices.shape[0], vertices.shape[1]
     C = R.shape[0]
     for task in prange(P * C):
@@ -284,8 +279,8 @@ def _project_kernel(vertices, R, t, K, dist, has_dist, uv, iz):
             zc = R[c, 2, 0] * X + R[c, 2, 1] * Y + R[c, 2, 2] * Z + t[c, 2]
             if zc <= Z_NEAR:
                 iz[p, c, v] = 0.0
-                uv[p, c, v, 0] = 0.0
-                uv[p, c, v, 1] = 0.0
+                q[p, c, v, 0] = 0
+                q[p, c, v, 1] = 0
                 continue
             x = xc / zc
             y = yc / zc
@@ -297,16 +292,24 @@ def _project_kernel(vertices, R, t, K, dist, has_dist, uv, iz):
                 xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
                 yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
                 x, y = xd, yd
-            uv[p, c, v, 0] = K[c, 0, 0] * x + K[c, 0, 1] * y + K[c, 0, 2]
-            uv[p, c, v, 1] = K[c, 1, 1] * y + K[c, 1, 2]
-            iz[p, c, v] = 1.0 / zc
+            u = K[c, 0, 0] * x + K[c, 0, 1] * y + K[c, 0, 2]
+            w = K[c, 1, 1] * y + K[c, 1, 2]
+            if abs(u) <= MAX_COORD_PX and abs(w) <= MAX_COORD_PX:  # as reference.snap
+                q[p, c, v, 0] = int(np.rint(u * SUBPIXEL))
+                q[p, c, v, 1] = int(np.rint(w * SUBPIXEL))
+                iz[p, c, v] = 1.0 / zc
+            else:
+                q[p, c, v, 0] = 0
+                q[p, c, v, 1] = 0
+                iz[p, c, v] = 0.0
 
 
 def project_views(vertices, cameras):
-    """(P,V,3) world vertices -> pixels (P,C,V,2) and inverse depths (P,C,V), 0 where not drawable (z <= Z_NEAR).
+    """(P,V,3) world vertices -> snapped pixels (P,C,V,2) int64 in 1/SUBPIXEL px and inverse depths (P,C,V),
+    0 where a vertex cannot be drawn (z <= Z_NEAR or beyond MAX_COORD_PX).
 
-    Same model as reference.project_views (Camera.project_with_depth), parallel over pose x camera, without
-    the NumPy temporaries that dominate the vectorised version for 200 poses x 4 views.
+    Same model as reference.project_views (Camera.project_with_depth) followed by reference.snap, parallel
+    over pose x camera, without the NumPy temporaries that dominate the vectorised version.
     """
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     C = len(cameras)
@@ -318,22 +321,21 @@ def project_views(vertices, cameras):
         dist[i, :c.dist.size] = c.dist
     has_dist = np.array([bool(np.any(c.dist)) for c in cameras])
     P, V = vertices.shape[:2]
-    uv = np.empty((P, C, V, 2))
+    q = np.empty((P, C, V, 2), dtype=np.int64)
     iz = np.empty((P, C, V))
-    _project_kernel(vertices, R, t, K, dist, has_dist, uv, iz)
-    return uv, iz
+    _project_kernel(vertices, R, t, K, dist, has_dist, q, iz)
+    return q, iz
 
 
-def statistics_from_inverse_depth(uv, iz, faces, face_label, targets: FrameTargets, need_chamfer=True, n_parts=0,
-                                  cull=0):
-    """`statistics` for the output of fast.project_views (inverse depths, 0 = do not draw)."""
-    P, C = uv.shape[:2]
+def statistics_from_snapped(q, iz, faces, face_label, targets: FrameTargets, need_chamfer=True, n_parts=0, cull=0):
+    """`statistics` for the output of fast.project_views (snapped pixels, inverse depths, 0 = do not draw)."""
+    P, C = q.shape[:2]
     stats = np.zeros((P, C, N_STATS))
     hist = np.zeros((P, C, max(n_parts, 1), 2, N_BINS), dtype=np.int32)  # dummy part when colour is off
     n_chunks = max(1, min(P * C, 4 * numba.get_num_threads()))
-    _statistics_kernel(np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(iz, dtype=np.float64),
+    _statistics_kernel(np.ascontiguousarray(q, dtype=np.int64), np.ascontiguousarray(iz, dtype=np.float64),
                        np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(face_label, dtype=np.int16),
-                       float(cull), targets.widths, targets.heights, targets.silhouette, targets.silhouette_dt,
+                       int(cull), targets.widths, targets.heights, targets.silhouette, targets.silhouette_dt,
                        targets.edge_off, targets.edge_dt, targets.ab_bins, targets.observed_box, bool(need_chamfer),
                        bool(n_parts), n_chunks, stats, hist)
     if not n_parts:

@@ -106,8 +106,9 @@ def project_views(vertices, cameras):
     P, V = vertices.shape[:2]
     uv = np.empty((P, len(cameras), V, 2))
     z = np.empty((P, len(cameras), V))
-    for c, cam in enumerate(cameras):
-        uv[:, c], z[:, c] = cam.project_with_depth(vertices)
+    with np.errstate(invalid="ignore", divide="ignore"):  # points at the camera centre: masked by z later
+        for c, cam in enumerate(cameras):
+            uv[:, c], z[:, c] = cam.project_with_depth(vertices)
     return uv, z
 
 
