@@ -55,6 +55,14 @@ except (ImportError, AttributeError):  # a numba without these internals: its de
     _ModuleKeyedCache = None
 
 
+def _chunks_one_at_a_time():
+    """Dynamic scheduling of prange iterations (numba >= 0.57); a no-op context on older numba."""
+    import contextlib
+
+    chunksize = getattr(numba, "parallel_chunksize", None)
+    return chunksize(1) if chunksize is not None else contextlib.nullcontext()
+
+
 def _jit(**options):
     """njit with the module-keyed disk cache (numba's default cache if that cannot be set up)."""
     def wrap(fn):
@@ -238,12 +246,13 @@ def _statistics_kernel(q, iz, faces, face_label, cull, widths, heights, sil, sil
     H, W = sil.shape[1], sil.shape[2]
     n_tasks = P * C
     for chunk in prange(n_chunks):
-        # One set of buffers per chunk, reused by all its tasks (tasks are dealt round-robin).
-        labels = np.zeros((H, W), dtype=np.int16)
-        zbuf = np.zeros((H, W), dtype=np.float64)
-        dt = np.zeros((H, W) if need_chamfer else (1, 1), dtype=np.int64)
-        row_lo = np.zeros(H, dtype=np.int64)
-        row_hi = np.zeros(H, dtype=np.int64)
+        # One set of buffers per chunk, reused by all its tasks (tasks are dealt round-robin). Left
+        # uninitialised: each task clears (or fills) exactly the region it later reads.
+        labels = np.empty((H, W), dtype=np.int16)
+        zbuf = np.empty((H, W), dtype=np.float64)
+        dt = np.empty((H, W) if need_chamfer else (1, 1), dtype=np.int64)
+        row_lo = np.empty(H, dtype=np.int64)
+        row_hi = np.empty(H, dtype=np.int64)
         for task in range(chunk, n_tasks, n_chunks):
             p = task // C
             c = task % C
@@ -332,12 +341,15 @@ def statistics_from_snapped(q, iz, faces, face_label, targets: FrameTargets, nee
     P, C = q.shape[:2]
     stats = np.zeros((P, C, N_STATS))
     hist = np.zeros((P, C, max(n_parts, 1), 2, N_BINS), dtype=np.int32)  # dummy part when colour is off
-    n_chunks = max(1, min(P * C, 4 * numba.get_num_threads()))
-    _statistics_kernel(np.ascontiguousarray(q, dtype=np.int64), np.ascontiguousarray(iz, dtype=np.float64),
-                       np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(face_label, dtype=np.int16),
-                       int(cull), targets.widths, targets.heights, targets.silhouette, targets.silhouette_dt,
-                       targets.edge_off, targets.edge_dt, targets.ab_bins, targets.observed_box, bool(need_chamfer),
-                       bool(n_parts), n_chunks, stats, hist)
+    # Many small chunks handed out one at a time: a thread that the OS (or a busy machine) slows down
+    # does not hold up the others.
+    n_chunks = max(1, min(P * C, 8 * numba.get_num_threads()))
+    with _chunks_one_at_a_time():
+        _statistics_kernel(np.ascontiguousarray(q, dtype=np.int64), np.ascontiguousarray(iz, dtype=np.float64),
+                           np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(face_label, dtype=np.int16),
+                           int(cull), targets.widths, targets.heights, targets.silhouette, targets.silhouette_dt,
+                           targets.edge_off, targets.edge_dt, targets.ab_bins, targets.observed_box, bool(need_chamfer),
+                           bool(n_parts), n_chunks, stats, hist)
     if not n_parts:
         hist = hist[:, :, :0]
     return stats, hist
