@@ -29,6 +29,7 @@ def fit_pose(body, target_heads, x0, target_rots=None, rot_bones=(), rot_weight=
     r = _residuals(body, x[None], target_heads, target_rots, rot_bones, rot_weight)[0]
     cost = r @ r
     for _ in range(iterations):
+        previous = cost
         probes = x[None] + np.vstack([np.zeros(D), eps * np.eye(D)])
         R = _residuals(body, probes, target_heads, target_rots, rot_bones, rot_weight)
         J = (R[1:] - R[0]).T / eps  # (n_res, D)
@@ -45,7 +46,7 @@ def fit_pose(body, target_heads, x0, target_rots=None, rot_bones=(), rot_weight=
                 improved = True
                 break
             damping *= 10
-        if not improved or np.linalg.norm(step) < 1e-7:
+        if not improved or np.linalg.norm(step) < 1e-7 or previous - cost < 1e-6 * previous:
             break
     return x, float(np.sqrt(cost / max(1, len(target_heads))))
 
