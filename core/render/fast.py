@@ -22,7 +22,7 @@ from numba import njit, prange
 from .reference import (BOUNDARY, BOUNDARY_OFF, MAX_COORD_PX, N_BINS, N_STATS, OVERLAP, SUBPIXEL, SUM_DI, SUM_DT,
                         SUM_EDGE_DT, TEMPLATE, Z_NEAR, FrameTargets, snap)
 
-_BIG = 1 << 40
+_BIG = 1 << 28  # 'no template pixel yet' in the int32 chamfer buffer (x3 units: ~90 million px)
 
 
 # ---------------------------------------------------------------------------------------- JIT cache
@@ -140,40 +140,30 @@ def _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_h
 
 @_jit()
 def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt):
-    """Sum over observed pixels of the 3-4 chamfer distance (pixels) to the template."""
+    """Sum over observed pixels of the 3-4 chamfer distance (pixels) to the template.
+
+    dt is (H+2, W+2): image pixel (y, x) lives at dt[y+1, x+1], so the ring of _BIG around the box
+    replaces every bounds test in the two passes.
+    """
     uy0, uy1 = min(ty0, oy0), max(ty1, oy1)
     ux0, ux1 = min(tx0, ox0), max(tx1, ox1)
-    for y in range(uy0, uy1 + 1):
-        for x in range(ux0, ux1 + 1):
-            inside = ty0 <= y <= ty1 and tx0 <= x <= tx1 and labels[y, x] > 0
-            dt[y, x] = 0 if inside else _BIG
-    for y in range(uy0, uy1 + 1):
-        for x in range(ux0, ux1 + 1):
-            v = dt[y, x]
-            if y > uy0:
-                v = min(v, dt[y - 1, x] + 3)
-                if x > ux0:
-                    v = min(v, dt[y - 1, x - 1] + 4)
-                if x < ux1:
-                    v = min(v, dt[y - 1, x + 1] + 4)
-            if x > ux0:
-                v = min(v, dt[y, x - 1] + 3)
-            dt[y, x] = v
+    for y in range(uy0, uy1 + 3):  # the box and its ring (buffer coordinates)
+        for x in range(ux0, ux1 + 3):
+            dt[y, x] = _BIG
+    for y in range(ty0, ty1 + 1):
+        for x in range(tx0, tx1 + 1):
+            if labels[y, x] > 0:
+                dt[y + 1, x + 1] = 0
+    for y in range(uy0 + 1, uy1 + 2):
+        for x in range(ux0 + 1, ux1 + 2):
+            dt[y, x] = min(dt[y, x], dt[y - 1, x - 1] + 4, dt[y - 1, x] + 3, dt[y - 1, x + 1] + 4,
+                           dt[y, x - 1] + 3)
     total = 0
-    for y in range(uy1, uy0 - 1, -1):
-        for x in range(ux1, ux0 - 1, -1):
-            v = dt[y, x]
-            if y < uy1:
-                v = min(v, dt[y + 1, x] + 3)
-                if x > ux0:
-                    v = min(v, dt[y + 1, x - 1] + 4)
-                if x < ux1:
-                    v = min(v, dt[y + 1, x + 1] + 4)
-            if x < ux1:
-                v = min(v, dt[y, x + 1] + 3)
+    for y in range(uy1 + 1, uy0, -1):
+        for x in range(ux1 + 1, ux0, -1):
+            v = min(dt[y, x], dt[y + 1, x - 1] + 4, dt[y + 1, x] + 3, dt[y + 1, x + 1] + 4, dt[y, x + 1] + 3)
             dt[y, x] = v
-            if oy0 <= y <= oy1 and ox0 <= x <= ox1 and obs[y, x]:
-                total += v
+            total += v * obs[y - 1, x - 1]  # obs is 0 outside the observed silhouette
     return total / 3.0
 
 
@@ -250,7 +240,7 @@ def _statistics_kernel(q, iz, faces, face_label, cull, widths, heights, sil, sil
         # uninitialised: each task clears (or fills) exactly the region it later reads.
         labels = np.empty((H, W), dtype=np.int16)
         zbuf = np.empty((H, W), dtype=np.float64)
-        dt = np.empty((H, W) if need_chamfer else (1, 1), dtype=np.int64)
+        dt = np.empty((H + 2, W + 2) if need_chamfer else (1, 1), dtype=np.int32)
         row_lo = np.empty(H, dtype=np.int64)
         row_hi = np.empty(H, dtype=np.int64)
         for task in range(chunk, n_tasks, n_chunks):
