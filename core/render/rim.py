@@ -150,9 +150,13 @@ def rim_vertices(vertices, faces, camera, edges: MeshEdges | None = None, *, dep
     """Visible rim vertices of the mesh `vertices` (V,3 world) in `camera` (at the energy resolution).
 
     depth: a z-buffer from `depth_buffer` for this view (computed here when None).
-    A vertex is visible when it is no deeper than the farthest drawn surface in the (2w+1)^2 pixel
-    window around its projection plus `depth_tolerance` (metres), so a surface in front of all its
-    neighbouring pixels hides it. outer_only keeps vertices with background within that window.
+    Visibility is judged in the (2w+1)^2 pixel window around the vertex's projection:
+    * a background pixel there means the vertex sits on the outer outline, where nothing covers it
+      (the surface's own front side, right next to a rim, is far nearer than the rim itself, so a
+      plain depth comparison would wrongly hide it);
+    * otherwise it is visible when it is no deeper than the farthest drawn surface in the window
+      plus `depth_tolerance` (metres): a surface in front of all its neighbouring pixels hides it.
+    outer_only keeps only the first kind (the default: a silhouette image shows only the outer outline).
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -186,10 +190,11 @@ def rim_vertices(vertices, faces, camera, edges: MeshEdges | None = None, *, dep
     keep = (z[ids] > Z_NEAR) & (norm > 0) & (col >= 0) & (col < W) & (row >= 0) & (row < H)
     ids, norm, u, col, row = ids[keep], norm[keep], u[keep], col[keep].astype(np.int64), row[keep].astype(np.int64)
     background = np.isinf(depth)
-    farthest = _window_extreme(np.where(background, -np.inf, depth), window, np.maximum)[row, col]
-    visible = z[ids] <= farthest + depth_tolerance
-    visible |= np.isneginf(farthest)  # nothing drawn around it, so nothing in front of it
+    open_sky = _window_extreme(background, window, np.logical_or)[row, col]
     if outer_only:
-        visible &= _window_extreme(background, window, np.logical_or)[row, col]
+        visible = open_sky
+    else:
+        farthest = _window_extreme(np.where(background, -np.inf, depth), window, np.maximum)[row, col]
+        visible = (z[ids] <= farthest + depth_tolerance) | open_sky
     ids = ids[visible]
     return Rim(ids, uv[ids], z[ids], acc[ids] / norm[visible][:, None])
