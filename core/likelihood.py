@@ -162,7 +162,7 @@ def bhattacharyya_cost(model_hist, counts):
     with np.errstate(invalid="ignore", divide="ignore"):
         h = counts / n[..., None, None]
     bc = np.sqrt(np.nan_to_num(h) * model_hist[None]).sum(axis=-1)  # (P,S,2)
-    cost = (1.0 - bc).mean(axis=-1)
+    cost = np.clip(1.0 - bc, 0.0, 1.0).mean(axis=-1)  # rounding can push BC a hair above 1
     return np.where(n < MIN_PART_PIXELS, 1.0, cost)
 
 

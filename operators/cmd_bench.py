@@ -87,7 +87,7 @@ def load_body(subject):
     return body, make_proxy(body, 2000)
 
 
-def _capture_scene(folder, body):
+def _capture_scene(folder, body, scale):
     """(cameras, first-frame features, pose near the subject) from a capture folder, or None."""
     try:
         from ..core.capture.capture import load_capture
@@ -98,15 +98,17 @@ def _capture_scene(folder, body):
             capture.close()
             return None
         images = capture.frames.read(0)
-        feats = [compute_view_features(images[c.name], BackgroundModel.from_plate(capture.backgrounds[c.name]))
-                 for c in capture.cameras]
+        feats = [compute_view_features(images[c.name], BackgroundModel.from_plate(capture.backgrounds[c.name]),
+                                       scale=scale) for c in capture.cameras]
         cameras = capture.cameras
         capture.close()
         pose = body.default_pose()
         gt = Path(folder) / "gt_joints.npz"
-        if gt.is_file():
+        if gt.is_file():  # put the body where the subject's root joint is (else: the joints' centroid)
             with np.load(gt) as d:
-                pose[body.translation_dofs] = d["positions"][0].mean(axis=0)
+                names, joints = [str(n) for n in d["names"]], d["positions"][0]
+            root = body.skeleton.bone_names[body.root_bone]
+            pose[body.translation_dofs] = joints[names.index(root)] if root in names else joints.mean(axis=0)
         return cameras, feats, pose
     except Exception as exc:  # noqa: BLE001  (any unusable capture: fall back to the synthetic scene)
         print(f"bench: capture {folder} not usable ({exc}); using synthetic cameras", file=sys.stderr)
@@ -141,7 +143,7 @@ def run(args):
         return 1
     scale = lk.ENERGY_SCALE if args.scale is None else args.scale
     rng = np.random.default_rng(0)
-    scene = _capture_scene(args.capture, body) if args.capture and Path(args.capture).is_dir() else None
+    scene = _capture_scene(args.capture, body, scale) if args.capture and Path(args.capture).is_dir() else None
     lo = np.where(np.isfinite(body.lower), body.lower, -0.3)
     hi = np.where(np.isfinite(body.upper), body.upper, 0.3)
     if scene is None:
