@@ -317,3 +317,20 @@ def test_jit_cache_works_when_the_package_is_imported_under_two_names(tmp_path):
         run = subprocess.run([sys.executable, str(probe), name], cwd=tmp_path / name, capture_output=True, text=True,
                              env={**__import__("os").environ, "PYTHONPATH": str(tmp_path / name)}, timeout=300)
         assert run.returncode == 0, run.stderr[-2000:]
+
+
+def test_auto_backend_falls_back_to_numpy_with_a_warning_without_numba(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "numba", None)  # `import numba` raises ImportError
+    monkeypatch.delitem(sys.modules, fast.__name__)
+    monkeypatch.delattr(render, "fast", raising=False)
+    monkeypatch.setattr(render, "_warned", False)
+    with pytest.warns(RuntimeWarning, match="numba"):
+        assert render.resolve_backend("auto") == "numpy"
+    with pytest.raises(ImportError, match="backend='numpy'"):
+        render.resolve_backend("fast")
+    uv, z, faces = square_uv(1.5, 1.5, 6.5, 6.5)
+    targets = _targets_with_square(10, 10, slice(2, 7), slice(2, 7))
+    stats, _ = render.statistics(uv[None, None], z[None, None], faces, np.array([1, 1], np.int16), targets)
+    assert stats[0, 0, render.OVERLAP] == 25
