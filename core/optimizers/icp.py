@@ -28,7 +28,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..camera import Camera
-from ..render.rim import MeshEdges, depth_buffer, rim_vertices
+from ..render.rim import MeshEdges, rim_vertices
 from ..rotations import axis_angle_matrix, matrix_to_rotvec, rotvec_to_matrix
 from .base import CountingEnergy, Optimizer, OptimizerInputError, PoseSpace
 
@@ -144,8 +144,8 @@ def vertex_jacobian(body, pose_abs, rest_vertices, weights, descendants=None) ->
     D = descendant_matrix(sk) if descendants is None else descendants
     world = body.pose_matrices(x[None])[0]  # (B,4,4)
     skin = world @ sk.inv_rest
-    Xs = np.einsum("bij,nj->nbi", skin[:, :3, :3], rest_vertices) + skin[:, :3, 3]  # (N,B,3) each bone's motion
-    S = np.einsum("as,nsi->nai", D, weights[:, :, None] * Xs)  # weighted sum over the bones each bone moves
+    Xs = np.tensordot(rest_vertices, skin[:, :3, :3], axes=([1], [2])) + skin[:, :3, 3]  # (N,B,3) per bone
+    S = np.matmul(D, weights[:, :, None] * Xs)  # (N,B,3): weighted sum over the bones each bone moves
     Wd = weights @ D.T  # (N,B) weight each bone moves
     J = np.zeros((len(rest_vertices), 3, body.n_dof))
     r = body.root_bone
@@ -220,9 +220,7 @@ def find_correspondences(vertices, proxy_faces, edges, cameras, fields, d_max, c
     for v, (cam, fld) in enumerate(zip(cameras, fields)):
         if fld.n_contour == 0:
             continue
-        uv, z = cam.project_with_depth(vertices)
-        depth = depth_buffer(uv, z, proxy_faces, cam.width, cam.height)
-        rim = rim_vertices(vertices, proxy_faces, cam, edges, depth=depth)
+        rim = rim_vertices(vertices, proxy_faces, cam, edges)
         n_rim += len(rim)
         if len(rim) == 0:
             continue
@@ -319,9 +317,9 @@ class IcpSolver:
         H[np.ix_(free, free)] = (vecs * np.maximum(vals, 0.0)) @ vecs.T
         return e, g, H
 
-    def _residuals(self, x_abs, corr: Correspondences) -> np.ndarray:
+    def _residuals(self, x_abs, corr: Correspondences, verts=None) -> np.ndarray:
         """(N,2) pixel of each correspondence's rim vertex minus its contour point."""
-        verts = self._vertices(x_abs)
+        verts = self._vertices(x_abs) if verts is None else verts
         r = np.empty((len(corr), 2))
         for v, cam in enumerate(self.problem.cameras):
             m = corr.view == v
@@ -339,10 +337,10 @@ class IcpSolver:
         e = self._errors(self._residuals(x_abs, corr), corr)
         return float(huber_loss(e, self.settings.huber).mean()) + self._prior(x_abs)
 
-    def residual_jacobian(self, x_abs, corr: Correspondences) -> np.ndarray:
+    def residual_jacobian(self, x_abs, corr: Correspondences, verts=None) -> np.ndarray:
         """(N,2,D) derivative of every correspondence residual (pixel of the rim vertex)."""
         proxy = self.problem.proxy
-        verts = self._vertices(x_abs)
+        verts = self._vertices(x_abs) if verts is None else verts
         J3 = vertex_jacobian(self.problem.body, x_abs, proxy.vertices[corr.vertex], self.weights[corr.vertex],
                              self.descendants)
         J = np.empty((len(corr), 2, J3.shape[2]))
@@ -352,11 +350,11 @@ class IcpSolver:
                 J[m] = projection_jacobian(cam, verts[corr.vertex[m]]) @ J3[m]
         return J
 
-    def _normal_equations(self, x_abs, corr, r, e):
+    def _normal_equations(self, x_abs, corr, r, e, verts):
         """Huber-IRLS Gauss-Newton system (H, g) of the mean data term plus the prior, and the cost."""
         s, n = self.settings, len(corr)
         w = np.where(e <= s.huber, 1.0, s.huber / np.maximum(e, 1e-12))
-        J = self.residual_jacobian(x_abs, corr)
+        J = self.residual_jacobian(x_abs, corr, verts)
         if s.residual == "line":
             J = np.einsum("ni,nid->nd", corr.normal, J)
             rv = np.einsum("ni,ni->n", r, corr.normal)
@@ -378,18 +376,19 @@ class IcpSolver:
         for it in range(s.iterations):
             x_abs = self._absolute(x)
             d_max = s.d_max_at(it)
-            corr = find_correspondences(self._vertices(x_abs), self.problem.proxy.faces, self.edges,
-                                        self.problem.cameras, self.fields, d_max, cos_min)
+            verts = self._vertices(x_abs)
+            corr = find_correspondences(verts, self.problem.proxy.faces, self.edges, self.problem.cameras,
+                                        self.fields, d_max, cos_min)
             history["correspondences"].append(len(corr))
             history["rim_vertices"].append(corr.rim_count)
             history["d_max"].append(d_max)
             if len(corr) < MIN_CORRESPONDENCES:
                 stop = "too few correspondences"
                 break
-            r = self._residuals(x_abs, corr)
+            r = self._residuals(x_abs, corr, verts)
             e = self._errors(r, corr)
             history["mean_residual_px"].append(float(np.linalg.norm(r, axis=1).mean()))
-            H, g, cost0 = self._normal_equations(x_abs, corr, r, e)
+            H, g, cost0 = self._normal_equations(x_abs, corr, r, e, verts)
             history["cost"].append(cost0)
             diag = np.diag(H).copy()
             diag = np.maximum(diag, 1e-9 * max(float(diag.mean()), 1e-300))  # unobserved DOF stay put

@@ -74,51 +74,69 @@ def front_facing(vertices, faces, camera_center) -> np.ndarray:
     return np.einsum("fi,fi->f", n, np.asarray(camera_center, dtype=np.float64) - a) > 0
 
 
-def depth_buffer(uv, z, faces, width, height) -> np.ndarray:
-    """(H,W) depth of the nearest surface at every pixel centre (inf where nothing is drawn).
+def _pixel_samples(uv, z, faces, width, height):
+    """Every (pixel centre, triangle) pair with the centre inside the triangle.
 
-    Pixel (row i, column j) is sampled at (x=j, y=i). Candidates are all (triangle, pixel) pairs in
-    each triangle's bounding box, tested at once; depth is interpolated as 1/z (exact under
-    perspective for planar triangles); pixels on a shared edge may count for both triangles.
+    Returns flat pixel ids, triangle ids and the barycentric weights (wa, wb, wc). Candidates are all
+    pixels in each triangle's bounding box, tested at once; a centre on a shared edge counts for both.
     """
     uv = np.asarray(uv, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
+    empty = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((3, 0))
+    if len(faces) == 0:
+        return empty
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    xs = np.stack([a[:, 0], b[:, 0], c[:, 0]], axis=1)
+    ys = np.stack([a[:, 1], b[:, 1], c[:, 1]], axis=1)
+    with np.errstate(invalid="ignore"):
+        x0 = np.maximum(np.ceil(np.clip(xs.min(1), -1.0, width)), 0).astype(np.int64)
+        x1 = np.minimum(np.floor(np.clip(xs.max(1), -1.0, width)), width - 1).astype(np.int64)
+        y0 = np.maximum(np.ceil(np.clip(ys.min(1), -1.0, height)), 0).astype(np.int64)
+        y1 = np.minimum(np.floor(np.clip(ys.max(1), -1.0, height)), height - 1).astype(np.int64)
+    ok = (z[faces].min(1) > Z_NEAR) & (area != 0) & np.isfinite(area) & (x1 >= x0) & (y1 >= y0)
+    tri = np.nonzero(ok)[0]
+    if tri.size == 0:
+        return empty
+    nx, ny = x1[tri] - x0[tri] + 1, y1[tri] - y0[tri] + 1
+    counts = nx * ny
+    t = np.repeat(tri, counts)
+    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    nxt = np.repeat(nx, counts)
+    px = x0[t] + local % nxt
+    py = y0[t] + local // nxt
+    fx, fy = px.astype(np.float64), py.astype(np.float64)
+    # Barycentric weights (signed areas / total area): all >= 0 inside, whatever the winding.
+    s = 1.0 / area[t]
+    wa = ((b[t, 0] - fx) * (c[t, 1] - fy) - (b[t, 1] - fy) * (c[t, 0] - fx)) * s
+    wb = ((c[t, 0] - fx) * (a[t, 1] - fy) - (c[t, 1] - fy) * (a[t, 0] - fx)) * s
+    wc = 1.0 - wa - wb
+    inside = (wa >= 0) & (wb >= 0) & (wc >= 0)
+    return (py * width + px)[inside], t[inside], np.stack([wa[inside], wb[inside], wc[inside]])
+
+
+def depth_buffer(uv, z, faces, width, height) -> np.ndarray:
+    """(H,W) depth of the nearest surface at every pixel centre (inf where nothing is drawn).
+
+    Pixel (row i, column j) is sampled at (x=j, y=i); depth is interpolated as 1/z (exact under
+    perspective for planar triangles).
+    """
+    pixel, t, w = _pixel_samples(uv, z, faces, width, height)
     inv_depth = np.zeros(height * width)
-    if len(faces):
-        a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
-        zf = z[faces]
-        area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-        xs = np.stack([a[:, 0], b[:, 0], c[:, 0]], axis=1)
-        ys = np.stack([a[:, 1], b[:, 1], c[:, 1]], axis=1)
-        with np.errstate(invalid="ignore"):
-            x0 = np.maximum(np.ceil(np.clip(xs.min(1), -1.0, width)), 0).astype(np.int64)
-            x1 = np.minimum(np.floor(np.clip(xs.max(1), -1.0, width)), width - 1).astype(np.int64)
-            y0 = np.maximum(np.ceil(np.clip(ys.min(1), -1.0, height)), 0).astype(np.int64)
-            y1 = np.minimum(np.floor(np.clip(ys.max(1), -1.0, height)), height - 1).astype(np.int64)
-        ok = (zf.min(1) > Z_NEAR) & (area != 0) & np.isfinite(area) & (x1 >= x0) & (y1 >= y0)
-        tri = np.nonzero(ok)[0]
-        if tri.size:
-            nx, ny = x1[tri] - x0[tri] + 1, y1[tri] - y0[tri] + 1
-            counts = nx * ny
-            t = np.repeat(tri, counts)
-            local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-            nxt = np.repeat(nx, counts)
-            px = x0[t] + local % nxt
-            py = y0[t] + local // nxt
-            fx, fy = px.astype(np.float64), py.astype(np.float64)
-            # Barycentric weights (signed areas / total area): all >= 0 inside, whatever the winding.
-            s = 1.0 / area[t]
-            wa = ((b[t, 0] - fx) * (c[t, 1] - fy) - (b[t, 1] - fy) * (c[t, 0] - fx)) * s
-            wb = ((c[t, 0] - fx) * (a[t, 1] - fy) - (c[t, 1] - fy) * (a[t, 0] - fx)) * s
-            wc = 1.0 - wa - wb
-            inside = (wa >= 0) & (wb >= 0) & (wc >= 0)
-            t, wa, wb, wc = t[inside], wa[inside], wb[inside], wc[inside]
-            inv = wa / zf[t, 0] + wb / zf[t, 1] + wc / zf[t, 2]
-            np.maximum.at(inv_depth, py[inside] * width + px[inside], inv)
+    if pixel.size:
+        zf = np.asarray(z, dtype=np.float64)[np.asarray(faces, dtype=np.int64)[t]]
+        np.maximum.at(inv_depth, pixel, w[0] / zf[:, 0] + w[1] / zf[:, 1] + w[2] / zf[:, 2])
     with np.errstate(divide="ignore"):
         depth = np.where(inv_depth > 0, 1.0 / np.where(inv_depth > 0, inv_depth, 1.0), np.inf)
     return depth.reshape(height, width)
+
+
+def coverage(uv, z, faces, width, height) -> np.ndarray:
+    """(H,W) bool: pixel centres covered by the mesh (what depth_buffer draws, without depths)."""
+    mask = np.zeros(height * width, dtype=bool)
+    mask[_pixel_samples(uv, z, faces, width, height)[0]] = True
+    return mask.reshape(height, width)
 
 
 def _window_extreme(image, radius, reduce):
@@ -149,7 +167,8 @@ def rim_vertices(vertices, faces, camera, edges: MeshEdges | None = None, *, dep
                  depth_tolerance: float = 0.03, outer_only: bool = True, window: int = 1) -> Rim:
     """Visible rim vertices of the mesh `vertices` (V,3 world) in `camera` (at the energy resolution).
 
-    depth: a z-buffer from `depth_buffer` for this view (computed here when None).
+    depth: a z-buffer from `depth_buffer` for this view (computed here when None; with outer_only
+    only its background matters, so `coverage` stands in for it).
     Visibility is judged in the (2w+1)^2 pixel window around the vertex's projection:
     * a background pixel there means the vertex sits on the outer outline, where nothing covers it
       (the surface's own front side, right next to a rim, is far nearer than the rim itself, so a
@@ -167,8 +186,8 @@ def rim_vertices(vertices, faces, camera, edges: MeshEdges | None = None, *, dep
     edges = MeshEdges.from_faces(faces) if edges is None else edges
     W, H = camera.width, camera.height
     uv, z = camera.project_with_depth(vertices)
-    if depth is None:
-        depth = depth_buffer(uv, z, faces, W, H)
+    if depth is None:  # the outer outline needs only the coverage, which is cheaper
+        depth = np.where(coverage(uv, z, faces, W, H), 0.0, np.inf) if outer_only else depth_buffer(uv, z, faces, W, H)
     rim, front = rim_edges(vertices, faces, edges, camera.center)
 
     # Outward normals: perpendicular of each rim edge, pointing away from its front triangle's third corner.
