@@ -14,7 +14,10 @@ analytic Jacobian:
 * chain rule through the camera: d(pixel)/dX = K_2x2 . d(distortion) . d(x/z, y/z)/dX_cam . R.
 
 The data term is the *mean* Huber loss per correspondence (px^2), so the anatomical prior
-(lambda_anat V_anat, A9) keeps the same weight whatever the number of rim points. ICP uses no
+(lambda_anat V_anat, A9) keeps the same weight whatever the number of rim points; the prior enters
+the normal equations with its gradient and a finite-difference Hessian. residual="line" uses only
+the component of u - p along the contour normal (point-to-line ICP): same fixed point, but rim
+points may slide along the outline, which converges much faster (tests/test_icp.py measures both). ICP uses no
 black-box energy evaluations in its search; the base class scores the final estimate once.
 """
 from __future__ import annotations
