@@ -1,7 +1,10 @@
 """The fast likelihood statistics: one numba kernel, parallel over pose x view, no images kept.
 
-Same rules and same statistics as reference.py (read its docstring first); the arithmetic of the edge
-functions and of 1/z is written in the same order so both paths agree to the last bit on labels.
+Same rules and same statistics as reference.py (read its docstring first). Edge functions are exact
+integers on the 1/256 px grid (here stepped incrementally along each row) and 1/z uses the same float
+operations in the same order, so both paths give identical label images from the same projected points.
+`project_views` projects and snaps the posed vertices for all pose x camera pairs in parallel as well
+(checked against reference.project_views = Camera.project_with_depth + reference.snap).
 
 Per task (one pose in one view) a worker reuses its own label / 1/z / chamfer buffers and touches only
   * the template's bounding box (+1 pixel ring, cleared before drawing, so no full-image clears),
