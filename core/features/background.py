@@ -27,16 +27,23 @@ _CHI3_MEDIAN = 1.5382
 
 COLOUR_DEFAULTS = dict(
     blur_sigma=0.0,      # pre-blur (pixels at a 480-pixel short side) against sensor noise
-    chroma_k=4.0,        # chroma threshold in noise sigmas
+    chroma_k=6.0,        # chroma threshold in noise sigmas (video coding makes the tails heavy)
     chroma_min=6.0,      # chroma threshold floor, 0-255 units
-    shadow_min=0.5,      # darkest brightness ratio still accepted as shadow on the background
-    bright_max=1.35,     # brightest ratio still accepted as background (highlights, light changes)
+    shadow_min=0.7,      # darkest brightness ratio still accepted as shadow on the background
+    bright_max=1.1,      # brightest ratio still accepted as background (highlights, light changes)
     bright_k=4.0,        # absolute brightness-difference threshold in noise sigmas
     bright_min=10.0,     # and its floor, 0-255 units
     adapt_gain=True,     # divide out a global per-channel gain between frame and background
+    shadow_chroma_factor=1.0,  # chroma threshold factor for darkened pixels (shadows shift hue a little)
+    texture_ncc_min=0.5,  # a darkened/tinted pixel whose local texture correlates this well with the
+                          # background's is a shadow or light change on it, not the subject (0 = off)
+    texture_min=3.0,      # ... only where the background has texture (grey std in the window, 0-255)
+    texture_window=11,    # window side at a 480-pixel short side
+    texture_alpha_min=0.25,   # ... and only for pixels no darker than this ratio
+    texture_chroma_max=1.5,   # ... whose chroma distortion is below this many chroma thresholds
     saturated_relax=1.0,  # >1 raises the chroma threshold where the background is clipped (hue unreliable there)
 )
-CLEANUP_DEFAULTS = dict(open_radius=1.0, close_radius=2.0, min_blob_fraction=2e-4, keep_fraction=0.03,
+CLEANUP_DEFAULTS = dict(open_radius=1.0, close_radius=3.0, min_blob_fraction=2e-4, keep_fraction=0.03,
                         max_hole_fraction=0.02)
 
 
@@ -112,27 +119,49 @@ def colour_foreground(image: np.ndarray, background: np.ndarray, noise_map: np.n
     if o["saturated_relax"] != 1.0:
         clipped = np.any(bg >= 250.0, axis=2)
         t_chroma = np.where(clipped, o["saturated_relax"] * t_chroma, t_chroma)
+    if o["shadow_chroma_factor"] != 1.0:
+        t_chroma = np.where(alpha < 0.95, o["shadow_chroma_factor"] * t_chroma, t_chroma)
     bright_diff = (alpha - 1.0) * np.sqrt(bb)
-    return ((chroma > t_chroma)
-            | ((alpha < o["shadow_min"]) & (-bright_diff > t_bright))
-            | ((alpha > o["bright_max"]) & (bright_diff > t_bright)))
+    fg = ((chroma > t_chroma)
+          | ((alpha < o["shadow_min"]) & (-bright_diff > t_bright))
+          | ((alpha > o["bright_max"]) & (bright_diff > t_bright)))
+    if o["texture_ncc_min"] > 0:
+        ncc, bg_std = texture_correlation(image, bg, o["texture_window"])
+        # Only colour changes a shadow or a light could make: not too dark, hue not far off.
+        plausible = (alpha > o["texture_alpha_min"]) & (chroma < o["texture_chroma_max"] * t_chroma)
+        fg &= ~((ncc > o["texture_ncc_min"]) & (bg_std > o["texture_min"]) & plausible)
+    return fg
+
+
+def texture_correlation(image: np.ndarray, background: np.ndarray, window_at_480: float):
+    """Local normalised cross-correlation of the grey images and the background's local grey std.
+
+    A shadow or a light change scales the background's texture, so the correlation stays high; the
+    subject replaces the texture, so it drops."""
+    side = max(3, int(round(window_at_480 * min(image.shape[:2]) / 480.0)) | 1)
+    grey_i = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    grey_b = cv2.cvtColor(background, cv2.COLOR_BGR2GRAY)
+
+    def mean(x):
+        return cv2.boxFilter(x, -1, (side, side), borderType=cv2.BORDER_REFLECT)
+
+    mi, mb = mean(grey_i), mean(grey_b)
+    var_i = np.maximum(mean(grey_i * grey_i) - mi * mi, 0.0)
+    var_b = np.maximum(mean(grey_b * grey_b) - mb * mb, 0.0)
+    cov = mean(grey_i * grey_b) - mi * mb
+    ncc = cov / np.sqrt(np.maximum(var_i * var_b, 1e-6))
+    return ncc, np.sqrt(var_b)
 
 
 class BackgroundModel:
-    """Per-camera background: a plate (given or estimated from the clip) or an OpenCV subtractor."""
+    """Per-camera background: an image of the empty scene (given, or estimated from the clip), an
+    optional per-pixel noise level, and the options of the colour test and of the clean-up."""
 
-    def __init__(self, background_bgr: np.ndarray | None, noise_map: np.ndarray | None = None,
-                 subtractor=None, shape=None, **opts):
+    def __init__(self, background_bgr: np.ndarray, noise_map: np.ndarray | None = None, **opts):
         self.colour_options, self.cleanup_options = _split_options(opts)
-        self.subtractor = subtractor
-        if background_bgr is not None:
-            self.background = as_bgr_float(background_bgr, "background plate")
-            self.shape = self.background.shape[:2]
-            self._blurred = _blur(self.background, self.colour_options["blur_sigma"])
-        else:
-            if subtractor is None or shape is None:
-                raise FeatureInputError("a BackgroundModel needs a background image or an OpenCV subtractor")
-            self.background, self._blurred, self.shape = None, None, tuple(shape[:2])
+        self.background = as_bgr_float(background_bgr, "background plate")
+        self.shape = self.background.shape[:2]
+        self._blurred = _blur(self.background, self.colour_options["blur_sigma"])
         self.noise_map = noise_map
 
     @classmethod
@@ -148,7 +177,8 @@ class BackgroundModel:
 
         median: per-pixel temporal median of gain-normalised frames, with a per-pixel noise level
                 (median absolute deviation over the frames) that raises thresholds where the clip flickers.
-        mog2 / knn: OpenCV's adaptive mixture / nearest-neighbour subtractors with shadow detection.
+        mog2 / knn: the empty scene as estimated by OpenCV's mixture / nearest-neighbour subtractors
+                (getBackgroundImage), then the same colour test. Weaker than the median on short clips.
         """
         frames = list(frames_bgr)
         if len(frames) < 3:
@@ -209,8 +239,6 @@ class BackgroundModel:
         """Per-pixel foreground decision before clean-up (bool HxW)."""
         img = as_bgr_float(image_bgr, "frame")
         self._check_size(img)
-        if self.subtractor is not None:
-            return self.subtractor.apply(np.clip(img, 0, 255).astype(np.uint8), learningRate=0) == 255
         o = self.colour_options
         blurred = _blur(img, o["blur_sigma"])
         if not o["adapt_gain"]:

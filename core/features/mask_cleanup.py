@@ -29,7 +29,7 @@ def check_mask(mask, name="mask") -> np.ndarray:
     return arr.astype(bool)
 
 
-def clean_silhouette(mask: np.ndarray, open_radius: float = 1.0, close_radius: float = 2.0,
+def clean_silhouette(mask: np.ndarray, open_radius: float = 1.0, close_radius: float = 3.0,
                      min_blob_fraction: float = 2e-4, keep_fraction: float = 0.03,
                      max_hole_fraction: float = 0.02) -> np.ndarray:
     """Clean a raw foreground mask (bool HxW) -> bool HxW.
