@@ -93,13 +93,19 @@ def aos_step(u: np.ndarray, g: np.ndarray, tau: float) -> np.ndarray:
     off[1:h, :k_cols] = np.repeat((-0.5 * step) * (g[:-1, :] + g[1:, :]), c, axis=1)
     off[1:w, k_cols:] = np.repeat((-0.5 * step) * (g[:, :-1] + g[:, 1:]).T, c, axis=1)
     diag = 1.0 - off[1:] - off[:-1]
-    rhs = np.zeros((length, k_cols + k_rows), dtype=dtype)
-    rhs[:h, :k_cols] = u.reshape(h, k_cols)
-    rhs[:w, k_cols:] = u.transpose(1, 0, 2).reshape(w, k_rows)
-    x = thomas_solve(off[:-1], diag, off[1:], rhs)
-    v_cols = x[:h, :k_cols].reshape(h, w, c)
-    v_rows = x[:w, k_cols:].reshape(w, h, c).transpose(1, 0, 2)
-    return 0.5 * (v_cols + v_rows)
+    lines = np.zeros((length, k_cols + k_rows), dtype=dtype)
+    lines[:h, :k_cols] = u.reshape(h, k_cols)
+    lines[:w, k_cols:] = u.transpose(1, 0, 2).reshape(w, k_rows)
+    # Solve for the change d = v - u: (I - 2 tau A) d = 2 tau A u. Same solution, but rounding errors
+    # scale with the change instead of the values (a flat image stays exactly flat in float32).
+    flux = off[1:length] * (lines[1:] - lines[:-1])      # -2 tau g_{i+1/2} (u_{i+1} - u_i)
+    rhs = np.zeros_like(lines)
+    rhs[:-1] -= flux
+    rhs[1:] += flux
+    change = thomas_solve(off[:-1], diag, off[1:], rhs)
+    d_cols = change[:h, :k_cols].reshape(h, w, c)
+    d_rows = change[:w, k_cols:].reshape(w, h, c).transpose(1, 0, 2)
+    return u + 0.5 * (d_cols + d_rows)
 
 
 def edge_enhancing_diffusion(ab: np.ndarray, steps: int = 5, tau: float = 2.0, eps: float = 1e-3,
