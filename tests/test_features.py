@@ -96,6 +96,30 @@ def test_shadow_would_be_foreground_without_the_shadow_test(room):
     assert np.count_nonzero(diff & shadow) > 0.5 * np.count_nonzero(shadow)
 
 
+def test_deep_shadow_on_textured_floor_is_rejected_by_texture_correlation():
+    """A shadow darker than the colour test's shadow band (x0.6 < shadow_min) on a plank-like floor:
+    the grain stays correlated with the plate, so it is still background; without the texture test
+    the whole shadow would be foreground."""
+    rng = np.random.default_rng(0)
+    h, w = 240, 320
+    yy, xx = np.mgrid[:h, :w]
+    grain = 0.75 + 0.25 * np.sin(xx * 0.9 + 3 * np.sin(yy * 0.05)) * np.cos(yy * 0.3)
+    plate = np.dstack([70 * grain, 120 * grain, 170 * grain]).astype(np.float32)
+    shot = np.clip(plate + rng.normal(0, 2, plate.shape), 0, 255).astype(np.uint8)
+    truth = person_mask(h, w, 150, 100)
+    shade = np.zeros((h, w), np.uint8)
+    cv2.ellipse(shade, (200, 190), (60, 14), 0, 0, 360, 1, -1)
+    img = plate * np.where(shade > 0, 0.6, 1.0)[:, :, None]
+    img[truth] = (90, 70, 60)
+    img = np.clip(img + rng.normal(0, 2, img.shape), 0, 255).astype(np.uint8)
+    shadow = (shade > 0) & ~truth
+    sil = BackgroundModel.from_plate(shot).silhouette(img)
+    assert silhouette_iou(sil, truth) >= 0.95
+    assert np.count_nonzero(sil & shadow) < 0.1 * np.count_nonzero(shadow)
+    colour_only = BackgroundModel.from_plate(shot, texture_ncc_min=0).silhouette(img)
+    assert np.count_nonzero(colour_only & shadow) > 0.9 * np.count_nonzero(shadow)
+
+
 def test_median_model_from_moving_subject(room):
     plate, _ = room
     rng = np.random.default_rng(3)
