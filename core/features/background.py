@@ -6,7 +6,12 @@ background colour B along B (brightness ratio alpha = I.B/|B|^2) and across it (
 
 * its chroma distortion exceeds the noise threshold, or
 * it is much darker than any plausible shadow (alpha < shadow_min), or much brighter than the
-  background (alpha > bright_max), by more than the noise threshold in absolute terms.
+  background (alpha > bright_max), by more than the noise threshold in absolute terms,
+
+and it is not explained by the texture test: where the background is textured, a shadow (even a deep
+one) or a local light change only scales the texture, so the local grey-level correlation between frame
+and background stays high, while the subject replaces the texture. Pixels that are not too dark and
+only mildly off in hue are returned to the background when that correlation is high.
 
 Global illumination changes (exposure, dimming lights, white balance drift) are divided out first with
 a robust per-channel gain between the frame and the background. The noise level is estimated from
@@ -20,7 +25,8 @@ import numpy as np
 from .errors import FeatureInputError
 from .mask_cleanup import clean_silhouette
 
-# Median of the Rayleigh distribution / its scale: converts the median chroma distortion into sigma.
+# 30th percentile of the Rayleigh distribution / its scale: turns that percentile of the chroma
+# distortion (robust to up to 70 % foreground) into the noise sigma.
 _RAYLEIGH_PCT30 = float(np.sqrt(-2.0 * np.log(0.7)))
 # Median of the chi distribution with 3 degrees of freedom (norm of a 3-D standard normal vector).
 _CHI3_MEDIAN = 1.5382
