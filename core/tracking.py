@@ -21,6 +21,9 @@ from .proxy import make_proxy
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
 
 REANCHOR_ANGLE = np.deg2rad(20.0)
+# Where the optimisers keep poses between frames (expressed relative to the anchor): these, and
+# only these, are re-expressed when the anchor moves. Scales and floors must not be touched.
+POSE_STATE_ATTRIBUTES = ("x0", "particles", "state", "hist")
 
 
 @dataclass
@@ -44,6 +47,8 @@ class TrackingSettings:
     # [DESIGN] The paper's captures run at 50-60 fps; ours at 30 fps move twice as far per frame,
     # more than the inter-frame mutation alone covers (measured: without it ISA drifts off a walk).
     velocity: bool = True
+    # Inter-frame mutation floor sigma_pred as a multiple of the per-DOF scale (20 mm, 5 degrees).
+    prediction_spread: float = 0.5
     optimizer_options: dict = field(default_factory=dict)
 
     @property
@@ -94,6 +99,7 @@ class Tracker:
         if self.settings.algorithm in ("isa", "apf"):
             kw.setdefault("n", self.settings.particles)
             kw.setdefault("velocity", self.settings.velocity)
+            kw.setdefault("sigma_pred", self.settings.prediction_spread * self.body.scale)
         if self.settings.algorithm in ("pf", "fsa") and self.dynamics is not None:
             kw.setdefault("dynamics", self.dynamics)
         return kw
@@ -154,10 +160,13 @@ class Tracker:
         def convert(poses):
             return self.to_relative(self.to_absolute_with(poses, old), new)
 
-        for name, value in vars(self.optimizer).items():
-            if isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[-1] == self.body.n_dof \
-                    and value.dtype.kind == "f" and name not in ("lower", "upper", "scale"):
-                setattr(self.optimizer, name, convert(value))
+        opt = self.optimizer
+        for name in POSE_STATE_ATTRIBUTES:
+            value = getattr(opt, name, None)
+            if isinstance(value, np.ndarray):
+                setattr(opt, name, convert(value))
+            elif isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):  # APF: (X, weights)
+                setattr(opt, name, (convert(value[0]),) + value[1:])
         self.history = [convert(h) for h in self.history]
 
     def to_absolute_with(self, poses, anchor):
