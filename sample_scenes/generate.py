@@ -28,7 +28,7 @@ import cv2  # noqa: E402
 
 import stage  # noqa: E402
 import subject  # noqa: E402
-from core.camera import Camera, camera_from_blender, camera_to_blender, BlenderCameraParams  # noqa: E402,F401
+from core.camera import BlenderCameraParams, Camera, camera_from_blender, camera_to_blender  # noqa: E402
 from core.capture.calibration import write_easymocap_calibration, write_toml_calibration  # noqa: E402
 from core.mocap import read_bvh, retarget  # noqa: E402
 
@@ -177,7 +177,7 @@ def retarget_scene(cfg, data_dir, arm, F):
 
 
 # ---------------------------------------------------------------- rendering
-def setup_cycles(samples, quick):
+def setup_cycles(samples, size):
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
@@ -200,8 +200,8 @@ def setup_cycles(samples, quick):
     scene.cycles.transparent_max_bounces = 2
     scene.cycles.seed = 0
     scene.render.use_persistent_data = True
-    scene.render.resolution_x, scene.render.resolution_y = W, H
-    scene.render.resolution_percentage = 25 if quick else 100
+    scene.render.resolution_x, scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
     scene.render.fps = FPS
     scene.render.film_transparent = False
     scene.render.image_settings.file_format = "PNG"
@@ -364,11 +364,21 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     stage.build_lights(bpy, cfg["uncontrolled"], F)
     cam_objs = []
     records = []
-    setup_cycles(samples, quick)
+    if quick:   # quarter size, with the calibration scaled to match
+        cams = [c.scaled(0.25) for c in cams]
+    setup_cycles(samples, cams[0].size)
     for cam in cams:
         ob, _ = add_blender_camera(cam)
         cam_objs.append(ob)
         records.append(blender_camera_record(ob, scene))
+        # what Blender holds (float32 lens/shift) must still be the calibration
+        r = records[-1]
+        back = camera_from_blender(BlenderCameraParams(
+            np.array(r["matrix_world"]), r["lens"], r["sensor_width"], r["sensor_height"], r["sensor_fit"],
+            r["shift_x"], r["shift_y"], r["resolution_x"], r["resolution_y"], r["pixel_aspect_x"],
+            r["pixel_aspect_y"], r["name"]))
+        if np.abs(back.K - cam.K).max() > 1e-4 or np.abs(back.R - cam.R).max() > 1e-6:
+            raise RuntimeError(f"{cam.name}: the Blender camera does not reproduce the calibration")
     (out / "render_cameras.json").write_text(json.dumps(
         {"note": "Blender camera objects exactly as rendered (created with core.camera.camera_to_blender)",
          "cameras": records}, indent=1))
