@@ -52,7 +52,7 @@ def clip_windows(n_frames, exclude, length, stride):
     return starts
 
 
-def training_sequences(body, fps=30.0, exclude=None, window=40, stride=60, max_windows=8, clips=None):
+def training_sequences(body, fps=30.0, exclude=None, window=40, stride=30, max_windows=10, clips=None):
     """List of (T,D) pose sequences at `fps` from the bundled clips (cached per rig).
 
     exclude: {clip file stem: (first, last)} frames at `fps` to leave out.

@@ -33,7 +33,7 @@ GROUPS = {"head": [1, 2], "upper": [3, 4, 5], "lower": [6]}
 
 
 def test_energy_matches_the_parzen_formula_and_stays_finite_far_away():
-    prior = AnatomicalPrior.fit(_training(), GROUPS, n_samples=200, seed=3)
+    prior = AnatomicalPrior.fit(_training(), GROUPS, n_samples=200, seed=3, floor_sigmas=None)
     assert all(len(s) == 200 for s in prior.samples.values())
     x = np.random.default_rng(1).normal(0, 0.3, (6, 7)) + np.sin(np.arange(7))
     e = prior.energy(x)
@@ -47,6 +47,23 @@ def test_energy_matches_the_parzen_formula_and_stays_finite_far_away():
     assert np.isfinite(far).all() and far[0] > 1e4
     # Likely poses score lower than unlikely ones.
     assert prior.energy(np.sin(np.arange(7))[None])[0] < prior.energy(np.sin(np.arange(7))[None] + 1.0)[0]
+
+
+def test_floor_bounds_the_penalty_far_from_the_data():
+    exact = AnatomicalPrior.fit(_training(), GROUPS, n_samples=200, seed=3, floor_sigmas=None)
+    floored = AnatomicalPrior.fit(_training(), GROUPS, n_samples=200, seed=3, floor_sigmas=3.0)
+    near = np.sin(np.arange(7))[None]
+    assert floored.energy(near) == pytest.approx(exact.energy(near))  # unchanged where data is
+    far = np.full((2, 7), 50.0)
+    # Far away: each group costs exactly one sample's kernel at 3 bandwidths; no pull any more.
+    expected = 0.0
+    for g, y in floored.samples.items():
+        L, d = y.shape
+        h = floored.bandwidths[g]
+        expected -= -4.5 - np.log(L) - d * np.log(h) - 0.5 * d * np.log(2 * np.pi)
+    assert floored.energy(far) == pytest.approx([expected / len(floored.groups)] * 2)
+    assert np.all(floored.gradient(far) == 0)
+    assert exact.energy(far)[0] > floored.energy(far)[0] + 1e3
 
 
 def test_gradient_matches_finite_differences():
