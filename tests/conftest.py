@@ -22,6 +22,8 @@ _pkg_parent.mkdir()
 (_pkg_parent / PACKAGE).symlink_to(REPO_ROOT, target_is_directory=True)
 sys.path.insert(0, str(_pkg_parent))
 os.environ.setdefault("BLENDER_USER_RESOURCES", str(_tmp_root / "blender_user"))
+# Motion models (prior, dynamics) are cached per rig; keep the tests' cache out of the user's home.
+os.environ.setdefault("MOCAP_CACHE_DIR", str(_tmp_root / "cache"))
 
 SAMPLE_SCENES = REPO_ROOT / "sample_scenes"
 
