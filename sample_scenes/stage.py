@@ -207,17 +207,22 @@ def build_lights(bpy, uncontrolled, n_frames):
     if uncontrolled:
         # illumination drifts over the clip (clouds / a dimmer): strength and colour keyed
         keys = np.linspace(1, n_frames, 5)
-        strengths = [2.5, 0.9, 3.2, 1.4, 2.0]
-        tints = [(1.0, 0.95, 0.85), (0.8, 0.85, 1.0), (1.0, 0.9, 0.75), (0.85, 0.9, 1.0), (1.0, 1.0, 0.95)]
-        for f, s, c in zip(keys, strengths, tints):
-            sun_data.energy = s
+        # all sources follow one envelope (a cloud passing, a dimmer): the mean image brightness
+        # swings by about a third, and the colour goes from warm to cool and back
+        envelope = [1.0, 0.3, 1.15, 0.4, 0.8]
+        tints = [(1.0, 0.85, 0.65), (0.7, 0.8, 1.0), (1.0, 0.82, 0.6), (0.72, 0.82, 1.0), (1.0, 0.95, 0.85)]
+        for f, e, c in zip(keys, envelope, tints):
+            sun_data.energy = 3.0 * e
             sun_data.color = c
             sun_data.keyframe_insert("energy", frame=float(f))
             sun_data.keyframe_insert("color", frame=float(f))
-        for k, ad in enumerate(areas):
-            for f, s in zip(keys, [450, 250, 500, 200, 380] if k == 0 else [300, 520, 220, 480, 350]):
-                ad.energy = s
+            bg.inputs["Strength"].default_value = 0.3 * e
+            bg.inputs["Strength"].keyframe_insert("default_value", frame=float(f))
+            for ad in areas:
+                ad.energy = 450.0 * e
+                ad.color = c
                 ad.keyframe_insert("energy", frame=float(f))
+                ad.keyframe_insert("color", frame=float(f))
         pl = bpy.data.lights.new("LampLight", "POINT")
         pl.energy = 150.0
         pl.color = (1.0, 0.8, 0.5)
