@@ -134,11 +134,4 @@ class MOCAP_PT_results(_MocapPanel, bpy.types.Panel):
 classes = (MOCAP_PT_capture, MOCAP_PT_subject, MOCAP_PT_track, MOCAP_PT_results)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

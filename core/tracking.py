@@ -9,6 +9,7 @@ Root rotation (algorithms.md 1.4): the optimisers see the root rotation relative
 the pi wrap of rotation vectors, even when the subject turns around. The anchor moves with the
 subject; stored particles are re-expressed when it does.
 """
+import dataclasses
 import time
 from dataclasses import asdict, dataclass, field
 
@@ -207,18 +208,24 @@ class Tracker:
             tilt, yaw = body.root_rotation_dofs[:2], body.root_rotation_dofs[2]  # rotation vector in world axes, Z up
             spread[tilt] = np.deg2rad(8.0)
             spread[yaw] = s.init_yaw / 2
-            result = searcher.global_init(
-                self._energy_fn, x0, spread, n=s.init_particles, iterations=s.init_iterations, joints="around",
-                translation_dofs=body.translation_dofs, translation_half_width=s.init_translation,
-                yaw_dof=None)
+            weights = self.energy.weights
+            # The colour model is built from the initial pose, so the search for it cannot use colour.
+            self.energy.weights = dataclasses.replace(weights, color=0.0)
+            try:
+                result = searcher.global_init(
+                    self._energy_fn, x0, spread, n=s.init_particles, iterations=s.init_iterations,
+                    joints="around", translation_dofs=body.translation_dofs,
+                    translation_half_width=s.init_translation, yaw_dof=None)
+            finally:
+                self.energy.weights = weights
             pose = self.to_absolute(result.estimate)
             evaluations = result.evaluations
         else:
             pose = np.asarray(initial_pose, float)
             evaluations = 0
-        energy = float(self.energy(pose[None])[0])
         if self.uses_color:
             self.energy.init_color_model(pose)
+        energy = float(self.energy(pose[None])[0])
         self.optimizer.start(self.to_relative(pose))
         return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
 

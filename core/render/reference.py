@@ -131,6 +131,17 @@ def _owns_zero_edge(ax, ay, bx, by):
     return (dy < 0) | ((dy == 0) & (dx > 0))
 
 
+def bounding_box_pixels(tri, x0, x1, y0, y1):
+    """Every pixel of every listed triangle's bounding box, without a Python loop:
+    (triangle index, pixel x, pixel y) per candidate pixel."""
+    nx, ny = x1[tri] - x0[tri] + 1, y1[tri] - y0[tri] + 1
+    counts = nx * ny
+    t = np.repeat(tri, counts)
+    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    nxt = np.repeat(nx, counts)
+    return t, x0[t] + local % nxt, y0[t] + local // nxt
+
+
 def rasterize(uv, z, faces, face_label, width, height, cull=0):
     """One mesh in one view -> label image (H,W) int16 (0 background, face_label elsewhere).
 
@@ -165,13 +176,7 @@ def rasterize(uv, z, faces, face_label, width, height, cull=0):
     tri = np.nonzero(ok)[0]
     if tri.size == 0:
         return labels
-    nx, ny = x1[tri] - x0[tri] + 1, y1[tri] - y0[tri] + 1
-    counts = nx * ny
-    t = np.repeat(tri, counts)
-    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    nxt = np.repeat(nx, counts)
-    px = x0[t] + local % nxt
-    py = y0[t] + local // nxt
+    t, px, py = bounding_box_pixels(tri, x0, x1, y0, y1)
     sx, sy = px * SUBPIXEL, py * SUBPIXEL
     ax_, ay_, bx_, by_, cx_, cy_ = a[t, 0], a[t, 1], b[t, 0], b[t, 1], c[t, 0], c[t, 1]
     w0 = _edge(bx_, by_, cx_, cy_, sx, sy)  # weight of a

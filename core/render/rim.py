@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .reference import bounding_box_pixels
+
 Z_NEAR = 1e-3  # metres: triangles with a corner closer to the camera plane are not drawn
 
 
@@ -99,13 +101,7 @@ def _pixel_samples(uv, z, faces, width, height):
     tri = np.nonzero(ok)[0]
     if tri.size == 0:
         return empty
-    nx, ny = x1[tri] - x0[tri] + 1, y1[tri] - y0[tri] + 1
-    counts = nx * ny
-    t = np.repeat(tri, counts)
-    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    nxt = np.repeat(nx, counts)
-    px = x0[t] + local % nxt
-    py = y0[t] + local // nxt
+    t, px, py = bounding_box_pixels(tri, x0, x1, y0, y1)
     fx, fy = px.astype(np.float64), py.astype(np.float64)
     # Barycentric weights (signed areas / total area): all >= 0 inside, whatever the winding.
     s = 1.0 / area[t]
