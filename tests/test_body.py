@@ -99,20 +99,41 @@ def _joint(body, x, bone):
     return body.joint_positions(x[None])[0, body.skeleton.index[bone]]
 
 
-@pytest.mark.parametrize("rig_file,prefix", [("cmu_mb_rest.json", ""), ("mixamo_rest.json", "mixamorig:")])
+# The CMU-named MakeHuman rig renamed to Rigify's deform-bone names (same geometry, other naming).
+RIGIFY_NAMES = {"Hips": "DEF-spine", "LowerBack": "DEF-spine.001", "Spine": "DEF-spine.002",
+                "Spine1": "DEF-spine.003", "Neck": "DEF-spine.004", "Neck1": "DEF-spine.005", "Head": "DEF-spine.006",
+                **{f"{side}{cmu}": f"DEF-{rigify}.{side[0]}" for side in ("Left", "Right") for cmu, rigify in
+                   (("Arm", "upper_arm"), ("ForeArm", "forearm"), ("Hand", "hand"), ("UpLeg", "thigh"),
+                    ("Leg", "shin"), ("Foot", "foot"))}}
+
+
+def _rename_to_rigify(arm):
+    for bone in arm.data.bones:
+        if bone.name in RIGIFY_NAMES:
+            bone.name = RIGIFY_NAMES[bone.name]
+
+
+@pytest.mark.parametrize("rig_file,prefix", [("cmu_mb_rest.json", ""), ("mixamo_rest.json", "mixamorig:"),
+                                             ("cmu_mb_rest.json", "rigify")])
 def test_anatomical_axes_bend_the_right_way(bpy_module, rig_file, prefix):
-    """Positive flexion moves limbs the anatomical way, whatever the bones' roll (CMU and Mixamo)."""
+    """Positive flexion moves limbs the anatomical way, whatever the bones' roll (CMU, Mixamo, Rigify)."""
     arm = build_armature(bpy_module, rig_file)
+    names = {}
+    if prefix == "rigify":
+        _rename_to_rigify(arm)
+        names, prefix = RIGIFY_NAMES, ""
     skeleton = _bridge().skeleton_from_armature(arm)
     body = build_body(skeleton, np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros((0, skeleton.n_bones)))
     assert body.n_dof == 30
+    assert body.preset == ("rigify" if names else "mixamo" if prefix else "cmu")
     forward, left = np.array([0, -1.0, 0]), np.array([1.0, 0, 0])  # MakeHuman faces -Y, left is +X
     x0 = body.default_pose()
 
     def moved(dof, bone, angle):
         x = x0.copy()
         x[_dof(body, dof)] = np.deg2rad(angle)
-        return _joint(body, x, prefix + bone) - _joint(body, x0, prefix + bone)
+        bone = names.get(bone, prefix + bone)
+        return _joint(body, x, bone) - _joint(body, x0, bone)
 
     assert moved("l_knee.flex", "LeftFoot", 60) @ forward < -0.1  # foot goes back
     assert moved("r_knee.flex", "RightFoot", 60) @ forward < -0.1
