@@ -93,7 +93,8 @@ def run(args):
             s = summarise(f[1:], e[1:])  # frame 1 is the common initial pose
             results.append({"label": label, "algorithm": algo, "likelihood": lik, "seed": seed,
                             "mean_mm": s.mean_mm, "std_mm": s.std_mm, "max_mm": s.max_mm,
-                            "seconds_per_frame": seconds, "evaluations_per_frame": budget})
+                            "seconds_per_frame": seconds,
+                            "evaluations_per_frame": float(np.mean([e.evaluations for e in ests[1:]]))})
     table = markdown_table(results, capture_dir, len(frames), budget, seeds)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "compare.md").write_text(table)
@@ -106,12 +107,14 @@ def run(args):
 def markdown_table(results, capture, n_frames, budget, seeds):
     lines = [f"3D error over 15 joints (mm, mean +- std over frames; mean over seeds {seeds}) on {capture}, "
              f"{n_frames} frames, {budget} energy evaluations per frame", "",
-             "| optimiser (likelihood) | error (mm) | max (mm) | s / frame |", "|---|---|---|---|"]
+             "| optimiser (likelihood) | error (mm) | max (mm) | s / frame | evaluations / frame |",
+             "|---|---|---|---|---|"]
     labels = list(dict.fromkeys(r["label"] for r in results))
     for label in labels:
         rs = [r for r in results if r["label"] == label]
         mean = np.mean([r["mean_mm"] for r in rs])
         std = np.mean([r["std_mm"] for r in rs])
         lines.append(f"| {label} | {mean:.1f} +- {std:.1f} | {max(r['max_mm'] for r in rs):.0f} | "
-                     f"{np.mean([r['seconds_per_frame'] for r in rs]):.2f} |")
+                     f"{np.mean([r['seconds_per_frame'] for r in rs]):.2f} | "
+                     f"{np.mean([r['evaluations_per_frame'] for r in rs]):.0f} |")
     return "\n".join(lines) + "\n"
