@@ -11,11 +11,13 @@ cd "$here"
 
 # --- system libraries bpy loads at import time (Debian/Ubuntu package names) ---
 missing=()
+# Read the linker cache once: `ldconfig -p | grep -q` under pipefail fails at random (SIGPIPE).
+known_libs="$(ldconfig -p 2>/dev/null || true)"
 for pair in libX11.so.6:libx11-6 libXrender.so.1:libxrender1 libXfixes.so.3:libxfixes3 \
             libXi.so.6:libxi6 libxkbcommon.so.0:libxkbcommon0 libSM.so.6:libsm6 \
             libICE.so.6:libice6 libXext.so.6:libxext6 libGL.so.1:libgl1 libEGL.so.1:libegl1; do
   lib="${pair%%:*}"; pkg="${pair##*:}"
-  if ! ldconfig -p 2>/dev/null | grep -q "$lib"; then missing+=("$pkg"); fi
+  case "$known_libs" in *"$lib"*) ;; *) missing+=("$pkg") ;; esac
 done
 if [ ${#missing[@]} -gt 0 ]; then
   echo "setup.sh: bpy needs system libraries that are missing: ${missing[*]}" >&2
