@@ -37,17 +37,11 @@ def software_versions():
         versions["numba"] = numba.__version__
     except ImportError:
         pass
-    try:
-        import bpy
-
-        versions["blender"] = bpy.app.version_string
-    except ImportError:
-        pass
     return versions
 
 
 class ResultWriter:
-    def __init__(self, out_dir, body, settings, info=None):
+    def __init__(self, out_dir, body, settings, info=None, blender_version=None):
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)
         self.body = body
@@ -55,6 +49,7 @@ class ResultWriter:
         self.info = dict(info or {})
         self.estimates = []
         self.started = time.time()
+        self.blender_version = blender_version  # the engine never imports bpy: the caller says
 
     @property
     def checkpoint_path(self):
@@ -85,7 +80,7 @@ class ResultWriter:
             "totals": {"frames": len(est), "seconds": float(sum(e.seconds for e in est)),
                        "seconds_per_frame": float(np.mean([e.seconds for e in est[1:]])) if len(est) > 1 else None,
                        "wall_seconds": time.time() - self.started},
-            "software": software_versions(),
+            "software": {**software_versions(), **({"blender": self.blender_version} if self.blender_version else {})},
         }
         _atomic_write(self.out / "report.json", lambda fh: fh.write(json.dumps(report, indent=1).encode()))
 

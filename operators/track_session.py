@@ -24,6 +24,12 @@ def build_motion_models(body, capture_folder, fps, seed=0):
     return build(body, fps=fps, exclude=scene_exclusion(capture_folder), seed=seed)
 
 
+def _blender_version():
+    import bpy
+
+    return bpy.app.version_string
+
+
 class TrackSession:
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
                  mesh_obj=None, frame_offset=None, prior=None, log=None, units=None):
@@ -46,7 +52,7 @@ class TrackSession:
         self.writer = ResultWriter(out_dir, self.body, self.settings, info={
             "capture": str(Path(capture_dir).resolve()), "armature": armature_obj.name,
             "cameras": [c.name for c in self.capture.cameras], "preset": self.body.preset,
-            "dof_names": self.body.dof_names})
+            "dof_names": self.body.dof_names}, blender_version=_blender_version())
         self.frames = list(self.all_frames)
         self._resume_state = None
         if resume:
