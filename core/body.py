@@ -217,7 +217,6 @@ class Body:
         """(P,D) -> (P,B,4,4) bone pose matrices (world space unless world=False)."""
         sk = self.skeleton
         basis = self.local_bases(poses, root_anchor)
-        P = basis.shape[0]
         pose = np.empty_like(basis)
         for b in sk.order:
             p = sk.parents[b]

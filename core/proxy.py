@@ -61,7 +61,7 @@ def make_proxy(body, target_triangles=2000):
     else:
         extent = np.ptp(verts, axis=0).max()
         lo, hi = extent * 1e-4, extent * 0.2
-        labels = None
+        labels, best_n = None, None
         for _ in range(40):
             cell = np.sqrt(lo * hi)
             trial = _cluster(verts, parts, cell)

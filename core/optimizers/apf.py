@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from .base import (RESAMPLERS, CountingEnergy, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
-                   gaussian_mutation, split_budget, weighted_covariance)
+                   gaussian_mutation, particle_sets, weighted_covariance)
 
 
 def survival_rate(V: np.ndarray, beta: float) -> float:
@@ -60,19 +60,8 @@ class AnnealedParticleFilter(Optimizer):
                  sigma_pred=None, p0_scale: float = 1.0, resampling: str = "multinomial",
                  estimate: str = "mean", init_spread: float = 0.5, velocity: bool = False, **params):
         super().__init__(space, budget, seed, **params)
-        if n < 2:
-            raise OptimizerInputError(f"APF needs at least 2 particles, got n={n}")
         self.velocity = bool(velocity)
-        self.n = int(n)
-        if M is None:
-            self.M = split_budget(self.budget, self.n, "APF")
-        else:
-            if budget is not None and int(M) * self.n > self.budget:
-                raise OptimizerInputError(f"APF: n*M = {n * M} exceeds the budget {budget}: lower M or n")
-            self.M = int(M)
-            self.budget = self.n * self.M
-        if self.M < 1:
-            raise OptimizerInputError("APF needs at least one layer (M >= 1)")
+        self.n, self.M = particle_sets(self, n, M, budget, "APF", "layer")
         if not 0 < alpha < 1:
             raise OptimizerInputError(f"APF survival rate alpha must lie in (0, 1), got {alpha}")
         if covariance not in ("adaptive", "fixed"):

@@ -258,6 +258,24 @@ def gaussian_mutation(space: PoseSpace, centres: np.ndarray, cov: np.ndarray,
     return space.sample_within_limits(propose, rng, centres.shape[0], redraws)
 
 
+def particle_sets(optimizer, n: int, M: int | None, budget: int | None, what: str, step: str) -> tuple[int, int]:
+    """(particles, sets) for ISA/APF: M sets of n particles within the budget (M = budget // n when not
+    given; an explicit M sets the budget to n * M). `step` names one set ("iteration", "layer")."""
+    if n < 2:
+        raise OptimizerInputError(f"{what} needs at least 2 particles, got n={n}")
+    n = int(n)
+    if M is None:
+        M = split_budget(optimizer.budget, n, what)
+    else:
+        if budget is not None and int(M) * n > optimizer.budget:
+            raise OptimizerInputError(f"{what}: n*M = {n * M} exceeds the budget {budget}: lower M or n")
+        M = int(M)
+        optimizer.budget = n * M
+    if M < 1:
+        raise OptimizerInputError(f"{what} needs at least one {step} (M >= 1)")
+    return n, M
+
+
 def split_budget(budget: int, n: int, what: str) -> int:
     """Iterations for n particles within the budget (floor); at least one."""
     if budget < n:

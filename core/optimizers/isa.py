@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from .base import (CountingEnergy, FrameResult, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
-                   gaussian_mutation, split_budget, systematic_resample, weighted_covariance)
+                   gaussian_mutation, particle_sets, systematic_resample, weighted_covariance)
 
 
 def epsilon_select(X: np.ndarray, g: np.ndarray, pi: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -74,18 +74,7 @@ class InteractingSimulatedAnnealing(Optimizer):
                  c_pred: float = 1.0, sigma_pred=None, velocity: bool = False, estimate: str = "mean",
                  covariance: str = "full", init_spread: float = 0.5, elitist: bool = True, **params):
         super().__init__(space, budget, seed, **params)
-        if n < 2:
-            raise OptimizerInputError(f"ISA needs at least 2 particles, got n={n}")
-        self.n = int(n)
-        if M is None:
-            self.M = split_budget(self.budget, self.n, "ISA")
-        else:
-            if budget is not None and int(M) * self.n > self.budget:
-                raise OptimizerInputError(f"ISA: n*M = {n * M} exceeds the budget {budget}: lower M or n")
-            self.M = int(M)
-            self.budget = self.n * self.M
-        if self.M < 1:
-            raise OptimizerInputError("ISA needs at least one iteration (M >= 1)")
+        self.n, self.M = particle_sets(self, n, M, budget, "ISA", "iteration")
         if schedule not in ("polynomial", "ess"):
             raise OptimizerInputError(f"ISA schedule must be 'polynomial' or 'ess', got {schedule!r}")
         if estimate not in ("mean", "best"):
