@@ -138,6 +138,15 @@ def _as_size(where: str, cam: str, value) -> tuple[int, int]:
     return int(arr[0]), int(arr[1])
 
 
+def _image_size(where: str, cam: str, in_file, image_sizes, missing_message: str) -> tuple[int, int]:
+    """The size the file gives, else the one measured from the footage, else a MissingImageSizeError."""
+    if in_file is None:
+        if not (image_sizes and cam in image_sizes):
+            raise MissingImageSizeError(f"{where}: camera '{cam}' {missing_message}")
+        in_file = image_sizes[cam]
+    return _as_size(where, cam, in_file)
+
+
 # ---- TOML family --------------------------------------------------------------------------------
 def _camera_tables(doc: dict, prefix: str = ""):
     """(key, table) for every table holding a 'matrix', searching nested tables (Caliscope)."""
@@ -211,14 +220,8 @@ def _read_toml(path: Path, units, image_sizes) -> list[Camera]:
         else:
             R = rodrigues_to_matrix(rot)
         t = _numeric(where, name, "translation", table["translation"], ((3,),)) * scale
-        size = table.get("size", table.get("image_size"))
-        if size is None:
-            if image_sizes and name in image_sizes:
-                size = image_sizes[name]
-            else:
-                raise MissingImageSizeError(f"{where}: camera '{name}' has no 'size' = [width, height]; add it to "
-                                            "the file")
-        W, H = _as_size(where, name, size)
+        W, H = _image_size(where, name, table.get("size", table.get("image_size")), image_sizes,
+                           "has no 'size' = [width, height]; add it to the file")
         cams.append(_make_camera(where, name, K, dist, R, t, W, H))
     if not cams:
         raise CalibrationError(f"{where}: no camera tables found (a camera is a table with 'matrix', 'size', "
@@ -300,14 +303,10 @@ def _read_easymocap(path: Path, units, image_sizes) -> list[Camera]:
                 raise CalibrationError(f"{wi}: camera '{name}' has {dist.size} values in 'dist_{name}'; "
                                        "expected 4, 5 or 8")
             H_node, W_node = fi.getNode(f"H_{name}"), fi.getNode(f"W_{name}")
-            if not H_node.empty() and not W_node.empty():
-                size = (W_node.real(), H_node.real())
-            elif image_sizes and name in image_sizes:
-                size = image_sizes[name]
-            else:
-                raise MissingImageSizeError(f"{wi}: camera '{name}' has no H_{name}/W_{name} image size; add them to "
-                                       "intri.yml or load it with its videos so the size can be read from them")
-            W, H = _as_size(wi, name, size)
+            in_file = (W_node.real(), H_node.real()) if not H_node.empty() and not W_node.empty() else None
+            W, H = _image_size(wi, name, in_file, image_sizes,
+                               f"has no H_{name}/W_{name} image size; add them to intri.yml or load it with its "
+                               "videos so the size can be read from them")
             R = _easymocap_rotation(fe, we, name)
             T = _storage_mat(fe, we, name, f"T_{name}")
             if T.size != 3:
