@@ -5,7 +5,7 @@ Scene: the sample subject (sample_scenes/walk/subject.blend or --subject). With 
 otherwise 4 synthetic 640x480 cameras ring the subject and the "observation" is the body itself,
 rendered by the reference path at a known pose (its silhouette, and its part boundaries as edges).
 The poses evaluated scatter around that pose. The reference path is timed on a few poses and scaled up.
-Ends with one JSON line: reference_s, fast_s, ratio, fk_lbs_s, poses, views, resolution, backend, ...
+Ends with one JSON line: reference_s, fast_s, ratio, fk_lbs_s, diffusion_vga_s, poses, views, resolution, backend, ...
 """
 import json
 import sys
@@ -132,6 +132,7 @@ def synthetic_features(model, pose):
 def run(args):
     from ..core import likelihood as lk
     from ..core import render
+    from ..core.features import edge_enhancing_diffusion
 
     if args.poses < 1 or args.reference_poses < 1 or args.repeats < 1:
         print("bench: --poses, --reference-poses and --repeats must be at least 1", file=sys.stderr)
@@ -195,8 +196,11 @@ def run(args):
           f"(extrapolated linearly)")
     agree = np.allclose(fast_model(poses[:n_ref]), ref_model(poses[:n_ref]), rtol=0.01)
     print(f"ratio reference / fast: {ref / fast:.1f}x; energies agree within 1%: {agree}")
+    ab = np.random.default_rng(4).normal(0, 20, (480, 640, 2)).astype(np.float32)
+    diffusion = _best(lambda: edge_enhancing_diffusion(ab, steps=5), args.repeats)
+    print(f"colour features: edge-enhancing diffusion (AOS, 5 steps) of a 640x480 a/b image: {diffusion * 1e3:.0f} ms")
     print(json.dumps({"reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
-                      "fk_lbs_s": round(fk, 4), "fast_cpu_s": round(fast_cpu, 4), "poses": args.poses, "views": len(cameras),
+                      "fk_lbs_s": round(fk, 4), "diffusion_vga_s": round(diffusion, 4), "fast_cpu_s": round(fast_cpu, 4), "poses": args.poses, "views": len(cameras),
                       "resolution": f"{w}x{h}", "backend": backend, "likelihood": args.likelihood,
                       "reference_poses_timed": n_ref, "energies_agree": bool(agree), "threads": _threads(),
                       "render_backends": list(render.BACKENDS)}))

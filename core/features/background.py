@@ -13,9 +13,9 @@ one) or a local light change only scales the texture, so the local grey-level co
 and background stays high, while the subject replaces the texture. Pixels that are not too dark and
 only mildly off in hue are returned to the background when that correlation is high.
 
-Global illumination changes (exposure, dimming lights, white balance drift) are divided out first with
-a robust per-channel gain between the frame and the background. The noise level is estimated from
-each frame (most pixels are background), so no per-camera tuning is needed.
+Global illumination changes (exposure, dimming lights, white balance drift) are taken out first: the
+background is brought to the frame's exposure with a per-channel tone curve or gain (exposure.py).
+The noise level is estimated from each frame (most pixels are background), so no per-camera tuning is needed.
 """
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from .errors import FeatureInputError
+from .exposure import EXPOSURE_MODELS, match_exposure
 from .mask_cleanup import clean_silhouette
 
 # 30th percentile of the Rayleigh distribution / its scale: turns that percentile of the chroma
@@ -39,7 +40,7 @@ COLOUR_DEFAULTS = dict(
     bright_max=1.1,      # brightest ratio still accepted as background (highlights, light changes)
     bright_k=4.0,        # absolute brightness-difference threshold in noise sigmas
     bright_min=10.0,     # and its floor, 0-255 units
-    adapt_gain=True,     # divide out a global per-channel gain between frame and background
+    exposure="curve",    # how the background follows the frame's light: "curve", "gain" or "none"
     shadow_chroma_factor=1.0,  # chroma threshold factor for darkened pixels (shadows shift hue a little)
     texture_ncc_min=0.5,  # a darkened/tinted pixel whose local texture correlates this well with the
                           # background's is a shadow or light change on it, not the subject (0 = off)
@@ -78,6 +79,8 @@ def _split_options(opts: dict) -> tuple[dict, dict]:
                                 f"{sorted(COLOUR_DEFAULTS) + sorted(CLEANUP_DEFAULTS)}")
     colour = {**COLOUR_DEFAULTS, **{k: v for k, v in opts.items() if k in COLOUR_DEFAULTS}}
     cleanup = {**CLEANUP_DEFAULTS, **{k: v for k, v in opts.items() if k in CLEANUP_DEFAULTS}}
+    if colour["exposure"] not in EXPOSURE_MODELS:
+        raise FeatureInputError(f"exposure must be one of {EXPOSURE_MODELS}, got {colour['exposure']!r}")
     if not 0.0 < colour["shadow_min"] < 1.0 < colour["bright_max"]:
         raise FeatureInputError("need 0 < shadow_min < 1 < bright_max (brightness ratios of the background)")
     return colour, cleanup
@@ -90,28 +93,14 @@ def _blur(image: np.ndarray, sigma_at_480: float) -> np.ndarray:
     return cv2.GaussianBlur(image, (0, 0), sigma)
 
 
-def channel_gain(image: np.ndarray, background: np.ndarray, use: np.ndarray | None = None) -> np.ndarray:
-    """Robust per-channel ratio image/background over well-exposed pixels (optionally only where `use`)."""
-    valid = (background > 12.0) & (background < 245.0) & (image < 250.0)
-    if use is not None:
-        valid &= use[:, :, None]
-    gains = np.ones(3, dtype=np.float32)
-    for c in range(3):
-        sel = valid[:, :, c]
-        if np.count_nonzero(sel) > 100:
-            gains[c] = np.median(image[:, :, c][sel] / background[:, :, c][sel])
-    return gains
-
-
-def colour_foreground(image: np.ndarray, background: np.ndarray, noise_map: np.ndarray | None = None,
-                      gain: np.ndarray | None = None, **colour) -> np.ndarray:
+def colour_foreground(image: np.ndarray, bg: np.ndarray, noise_map: np.ndarray | None = None,
+                      noise_scale: float = 1.0, **colour) -> np.ndarray:
     """Raw foreground decision (bool HxW) for blurred float images in 0..255 of the same size.
 
-    The background is first brought to the frame's exposure (x gain, clipped like the sensor clips) so
-    that saturated pixels of a brighter frame still match their background.
+    `bg` must already be at the frame's exposure (match_exposure); `noise_scale` carries the per-pixel
+    noise levels, measured at the background's exposure, over to the frame's.
     """
     o = {**COLOUR_DEFAULTS, **colour}
-    bg = background if gain is None else np.minimum(background * gain, np.float32(255.0))
     bb = np.einsum("ijc,ijc->ij", bg, bg) + 1.0
     alpha = np.einsum("ijc,ijc->ij", image, bg) / bb
     chroma = np.linalg.norm(image - alpha[:, :, None] * bg, axis=2)
@@ -119,7 +108,7 @@ def colour_foreground(image: np.ndarray, background: np.ndarray, noise_map: np.n
     t_chroma = max(o["chroma_min"], o["chroma_k"] * sigma)
     t_bright = max(o["bright_min"], o["bright_k"] * sigma)
     if noise_map is not None:
-        scaled_noise = noise_map if gain is None else noise_map * float(np.mean(gain))
+        scaled_noise = noise_map * np.float32(noise_scale)
         t_chroma = np.maximum(t_chroma, o["chroma_k"] * scaled_noise)
         t_bright = np.maximum(t_bright, o["bright_k"] * scaled_noise)
     if o["saturated_relax"] != 1.0:
@@ -181,7 +170,7 @@ class BackgroundModel:
         so that each pixel shows the background in most of the chosen frames); at most `max_frames`
         evenly spaced frames are used.
 
-        median: per-pixel temporal median of gain-normalised frames, with a per-pixel noise level
+        median: per-pixel temporal median of exposure-matched frames, with a per-pixel noise level
                 (median absolute deviation over the frames) that raises thresholds where the clip flickers.
         mog2 / knn: the empty scene as estimated by OpenCV's mixture / nearest-neighbour subtractors
                 (getBackgroundImage), then the same colour test. Weaker than the median on short clips.
@@ -210,10 +199,9 @@ class BackgroundModel:
         colour, _ = _split_options(opts)
         blurred = np.stack([_blur(f, colour["blur_sigma"]) for f in frames])
         median = np.median(blurred, axis=0).astype(np.float32)
-        if colour["adapt_gain"]:
+        if colour["exposure"] != "none":
             # Bring every frame to a common exposure before the median (the light may change over the clip).
-            gains = np.stack([channel_gain(f, median) for f in blurred])
-            blurred /= gains[:, None, None, :]
+            blurred = np.stack([match_exposure(f, median, colour["exposure"]) for f in blurred])
             median = np.median(blurred, axis=0).astype(np.float32)
         deviation = np.linalg.norm(blurred - median[None], axis=3)
         noise_map = (np.median(deviation, axis=0) / _CHI3_MEDIAN).astype(np.float32)
@@ -247,14 +235,16 @@ class BackgroundModel:
         self._check_size(img)
         o = self.colour_options
         blurred = _blur(img, o["blur_sigma"])
-        if not o["adapt_gain"]:
+        if o["exposure"] == "none":
             return colour_foreground(blurred, self._blurred, self.noise_map, **o)
-        # Two passes: the second estimates the gain from pixels the first pass called background.
-        gain = channel_gain(blurred, self._blurred)
-        first = colour_foreground(blurred, self._blurred, self.noise_map, gain, **o)
+        # Two passes: the second fits the exposure on the pixels the first pass called background.
+        first = self._decide(blurred, match_exposure(self._blurred, blurred, o["exposure"]))
         background_px = cv2.erode((~first).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-        gain = channel_gain(blurred, self._blurred, use=background_px)
-        return colour_foreground(blurred, self._blurred, self.noise_map, gain, **o)
+        return self._decide(blurred, match_exposure(self._blurred, blurred, o["exposure"], use=background_px))
+
+    def _decide(self, blurred, matched_background):
+        scale = float(matched_background.mean() / max(float(self._blurred.mean()), 1e-3))
+        return colour_foreground(blurred, matched_background, self.noise_map, scale, **self.colour_options)
 
     def silhouette(self, image_bgr: np.ndarray) -> np.ndarray:
         """The subject's silhouette in this frame (bool HxW, cleaned)."""
