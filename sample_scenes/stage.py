@@ -211,6 +211,14 @@ def build_lights(bpy, uncontrolled, n_frames):
         # swings by about a third, and the colour goes from warm to cool and back
         envelope = [1.0, 0.3, 1.15, 0.4, 0.8]
         tints = [(1.0, 0.85, 0.65), (0.7, 0.8, 1.0), (1.0, 0.82, 0.6), (0.72, 0.82, 1.0), (1.0, 0.95, 0.85)]
+        # the hanging lamp is on the same dimmer, so the whole image changes together, as it does with a
+        # camera's exposure and white-balance swings (its swinging still moves light and shadows locally)
+        pl = bpy.data.lights.new("LampLight", "POINT")
+        pl.color = (1.0, 0.8, 0.5)
+        lamp = bpy.data.objects.new("LampLight", pl)
+        scene.collection.objects.link(lamp)
+        lamp.parent = bpy.data.objects["LampPivot"]
+        lamp.location = (0, 0, -1.35)
         for f, e, c in zip(keys, envelope, tints):
             sun_data.energy = 3.0 * e
             sun_data.color = c
@@ -223,13 +231,8 @@ def build_lights(bpy, uncontrolled, n_frames):
                 ad.color = c
                 ad.keyframe_insert("energy", frame=float(f))
                 ad.keyframe_insert("color", frame=float(f))
-        pl = bpy.data.lights.new("LampLight", "POINT")
-        pl.energy = 150.0
-        pl.color = (1.0, 0.8, 0.5)
-        lamp = bpy.data.objects.new("LampLight", pl)
-        scene.collection.objects.link(lamp)
-        lamp.parent = bpy.data.objects["LampPivot"]
-        lamp.location = (0, 0, -1.35)
+            pl.energy = 150.0 * e
+            pl.keyframe_insert("energy", frame=float(f))
 
 
 def animate_moving(bpy, moving, n_frames):
