@@ -109,6 +109,8 @@ class Tracker:
             kw.setdefault("n", self.settings.particles)
             kw.setdefault("velocity", self.settings.velocity)
             kw.setdefault("sigma_pred", self.settings.prediction_spread * self.body.scale)
+        if self.settings.algorithm == "isa" and self.settings.velocity and self.dynamics is not None:
+            kw.setdefault("dynamics", self.dynamics)
         if self.settings.algorithm in ("pf", "fsa") and self.dynamics is not None:
             kw.setdefault("dynamics", self.dynamics)
         return kw
