@@ -59,6 +59,10 @@ def beta_for_ess(V: np.ndarray, target: float, lo: float = 1e-10, hi: float = 1e
 class InteractingSimulatedAnnealing(Optimizer):
     """ISA (algorithms.md 2.2-2.6). Defaults: n=200, M=budget//n=15, beta_m = 8 (m+1)^0.7, c=0.5.
 
+    velocity: shift the kept particles by the predicted displacement between frames: the mean of
+    `dynamics` (an AR(3) model, ConditionalGaussianDynamics) when given, as the paper predicts from the
+    previous estimates with its 3rd-order autoregression; else constant velocity.
+
     schedule: "polynomial" (fixed beta0 (m+1)^b) or "ess" (beta by bisection so that ESS/n falls
     linearly from ess_start to ess_end; when bisection cannot bracket the target, the polynomial
     value is used and counted in info["ess_fallbacks"]; beta is kept non-decreasing).
@@ -72,7 +76,8 @@ class InteractingSimulatedAnnealing(Optimizer):
                  M: int | None = None, beta0: float = 8.0, b: float = 0.7, schedule: str = "polynomial",
                  ess_start: float = 0.5, ess_end: float = 0.1, c: float = 0.5, sigma_floor=None,
                  c_pred: float = 1.0, sigma_pred=None, velocity: bool = False, estimate: str = "mean",
-                 covariance: str = "full", init_spread: float = 0.5, elitist: bool = True, **params):
+                 covariance: str = "full", init_spread: float = 0.5, elitist: bool = True, dynamics=None,
+                 **params):
         super().__init__(space, budget, seed, **params)
         self.n, self.M = particle_sets(self, n, M, budget, "ISA", "iteration")
         if schedule not in ("polynomial", "ess"):
@@ -95,6 +100,9 @@ class InteractingSimulatedAnnealing(Optimizer):
             np.asarray(sigma_pred, float), (d,)).copy()
         self.velocity, self.estimate_mode, self.covariance = bool(velocity), estimate, covariance
         self.init_spread, self.elitist = float(init_spread), bool(elitist)
+        if dynamics is not None and not hasattr(dynamics, "predict_from_history"):
+            raise OptimizerInputError("ISA dynamics must be a ConditionalGaussianDynamics (predict_from_history)")
+        self.dynamics = dynamics
         self.particles: np.ndarray | None = None
 
     @property
@@ -167,7 +175,10 @@ class InteractingSimulatedAnnealing(Optimizer):
         P = self.particles
         shift = np.zeros(d)
         if self.velocity and len(history) >= 2:
-            shift = history[-1] - history[-2]     # constant-velocity prediction minus x_{t-1}
+            if self.dynamics is not None:         # the paper: predicted by the AR(3) model (seed 4.2)
+                shift = self.dynamics.predict_from_history(history) - history[-1]
+            else:
+                shift = history[-1] - history[-2]     # constant-velocity prediction minus x_{t-1}
         cov = self.c_pred * weighted_covariance(P) + np.diag(self.sigma_pred ** 2)
         return gaussian_mutation(self.space, P + shift, cov, self.rng)
 
