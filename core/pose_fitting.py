@@ -9,29 +9,37 @@ import numpy as np
 from .rotations import matrix_to_rotvec
 
 
-def _residuals(body, poses, target_heads, target_rots, rot_bones, rot_weight):
+def _residuals(body, poses, target_heads, target_rots, rot_bones, rot_weight, hold_weight=0.0):
     M = body.pose_matrices(poses)  # (P,B,4,4)
     res = [(M[:, :, :3, 3] - target_heads).reshape(len(poses), -1)]
     if target_rots is not None and len(rot_bones):
         diff = M[:, rot_bones, :3, :3] - target_rots[rot_bones]
         res.append(rot_weight * diff.reshape(len(poses), -1))
+    if hold_weight:
+        # A weak pull of every joint angle towards the rest pose: angles the targets do not see
+        # (a neck twist when only bone heads are given) stay at rest instead of drifting to a limit.
+        res.append(hold_weight * np.delete(poses, body.translation_dofs, axis=1))
     return np.concatenate(res, axis=1)
 
 
 def fit_pose(body, target_heads, x0, target_rots=None, rot_bones=(), rot_weight=0.1, iterations=12,
-             fixed_bones_weight=None):
-    """One frame: x minimising |heads(x) - target|^2 (+ weighted orientation residuals), within limits."""
+             hold_weight=0.0):
+    """One frame: x minimising |heads(x) - target|^2 (+ weighted orientation residuals), within limits.
+
+    hold_weight (metres per radian) pulls the joint angles towards the rest pose; 0.01 leaves the
+    observed angles within a fraction of a percent and holds the unobserved ones at rest."""
     x = np.clip(np.asarray(x0, dtype=np.float64).copy(), body.lower, body.upper)
     rot_bones = np.asarray(rot_bones, dtype=np.int64)
     D = body.n_dof
     eps = 1e-5
     damping = 1e-3
-    r = _residuals(body, x[None], target_heads, target_rots, rot_bones, rot_weight)[0]
+    args = (target_heads, target_rots, rot_bones, rot_weight, hold_weight)
+    r = _residuals(body, x[None], *args)[0]
     cost = r @ r
     for _ in range(iterations):
         previous = cost
         probes = x[None] + np.vstack([np.zeros(D), eps * np.eye(D)])
-        R = _residuals(body, probes, target_heads, target_rots, rot_bones, rot_weight)
+        R = _residuals(body, probes, *args)
         J = (R[1:] - R[0]).T / eps  # (n_res, D)
         JtJ = J.T @ J
         g = J.T @ R[0]
@@ -39,7 +47,7 @@ def fit_pose(body, target_heads, x0, target_rots=None, rot_bones=(), rot_weight=
         for _ in range(6):
             step = np.linalg.solve(JtJ + damping * (np.diag(np.diag(JtJ)) + 1e-9 * np.eye(D)), -g)
             x_new = np.clip(x + step, body.lower, body.upper)
-            r_new = _residuals(body, x_new[None], target_heads, target_rots, rot_bones, rot_weight)[0]
+            r_new = _residuals(body, x_new[None], *args)[0]
             if r_new @ r_new < cost:
                 x, cost = x_new, r_new @ r_new
                 damping = max(damping / 3, 1e-7)
@@ -48,7 +56,8 @@ def fit_pose(body, target_heads, x0, target_rots=None, rot_bones=(), rot_weight=
             damping *= 10
         if not improved or np.linalg.norm(step) < 1e-7 or previous - cost < 1e-6 * previous:
             break
-    return x, float(np.sqrt(cost / max(1, len(target_heads))))
+    head_residual = _residuals(body, x[None], target_heads, None, (), 0.0)[0]
+    return x, float(np.sqrt(head_residual @ head_residual / max(1, len(target_heads))))
 
 
 def initial_root(body, target_heads):
@@ -66,13 +75,15 @@ def initial_root(body, target_heads):
     return x
 
 
-def fit_pose_sequence(body, heads, rotations=None, rot_bones=(), x0=None, iterations=12, rot_weight=0.1):
+def fit_pose_sequence(body, heads, rotations=None, rot_bones=(), x0=None, iterations=12, rot_weight=0.1,
+                      hold_weight=0.0):
     """(F,B,3) world heads [+ (F,B,3,3) world bone rotations] -> (F,D) poses and per-frame RMS residual."""
     poses, errors = [], []
     x = initial_root(body, heads[0]) if x0 is None else np.asarray(x0, dtype=np.float64)
     for f in range(len(heads)):
         rots = None if rotations is None else rotations[f]
-        x, err = fit_pose(body, heads[f], x, rots, rot_bones, rot_weight=rot_weight, iterations=iterations)
+        x, err = fit_pose(body, heads[f], x, rots, rot_bones, rot_weight=rot_weight, iterations=iterations,
+                          hold_weight=hold_weight)
         poses.append(x)
         errors.append(err)
     return np.array(poses), np.array(errors)

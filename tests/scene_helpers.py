@@ -23,7 +23,8 @@ def load_scene_body(bpy, name="walk"):
 
 @lru_cache(maxsize=4)
 def ground_truth_poses(name="walk"):
-    """Ground-truth joints as DOF vectors of the subject (fitted to every bone head)."""
+    """Ground-truth joints as DOF vectors of the subject (fitted to every bone head; angles the heads
+    do not see, such as the neck twist, held at rest)."""
     import bpy
 
     from markerless_mocap.core.pose_fitting import fit_pose_sequence
@@ -32,7 +33,7 @@ def ground_truth_poses(name="walk"):
     body, _ = load_scene_body(bpy, name)
     names, frames, positions = load_joints(scene_dir(name) / "gt_joints.npz")
     order = [names.index(n) for n in body.skeleton.bone_names]
-    poses, residual = fit_pose_sequence(body, positions[:, order])
+    poses, residual = fit_pose_sequence(body, positions[:, order], hold_weight=0.01)
     return body, frames, poses, residual
 
 
