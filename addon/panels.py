@@ -91,6 +91,7 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         col.prop(props, "particles")
         col.prop(props, "iterations")
         settings.prop(props, "seed")
+        settings.prop(props, "refine")
         settings.prop(props, "backend")
         settings.prop(props, "use_frame_range")
         rng = settings.column(align=True)

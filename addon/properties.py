@@ -71,6 +71,9 @@ class MocapSettings(bpy.types.PropertyGroup):
     iterations: IntProperty(name="Iterations", default=15, min=1, soft_max=100,
                             description="Annealing iterations / layers per frame")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: the same seed repeats the same result")
+    refine: BoolProperty(name="Refine Locally", default=True,
+                         description="After the search, fit the silhouette outlines locally (ICP): "
+                                     "less jitter, about a second more per frame")
     backend: EnumProperty(name="Backend", items=BACKENDS, default="auto",
                           description="How poses are rendered and compared with the images")
     use_frame_range: BoolProperty(name="Limit Frames", default=False,
@@ -106,7 +109,8 @@ class MocapSettings(bpy.types.PropertyGroup):
         from ..core.tracking import TrackingSettings
 
         return TrackingSettings(algorithm=self.algorithm, likelihood=self.likelihood, particles=self.particles,
-                                iterations=self.iterations, seed=self.seed, backend=self.backend)
+                                iterations=self.iterations, seed=self.seed, backend=self.backend,
+                                refine="icp" if self.refine else "none")
 
 
 classes = (MocapSettings,)

@@ -25,6 +25,7 @@ REANCHOR_ANGLE = np.deg2rad(20.0)
 # Where the optimisers keep poses between frames (expressed relative to the anchor): these, and
 # only these, are re-expressed when the anchor moves. Scales and floors must not be touched.
 POSE_STATE_ATTRIBUTES = ("x0", "particles", "state", "hist")
+PARTICLE_STATE_ATTRIBUTES = POSE_STATE_ATTRIBUTES[1:]  # what follows the estimate from frame to frame
 
 
 @dataclass
@@ -59,6 +60,13 @@ class TrackingSettings:
     # [LIT?] constants 8 and 0.7. Measured on the walk scene (ISA s+e, 20 frames from the true first
     # pose): mean 3D error 56 mm (ess) vs 63 mm (polynomial); without the prior 52 vs 56 mm.
     schedule: str = "ess"
+    # Local refinement after the search [DESIGN, after Gall et al.'s multi-layer framework, IJCV 2010: a
+    # global stochastic optimisation, then a local fit]: "icp" runs ICP with twists (silhouette rims) from
+    # the optimiser's estimate and moves the particles with it; "none" keeps the plain optimiser, as the
+    # paper's comparison does. Measured on the walk (ISA s+e 200x15, frames 1-19 from the true first
+    # pose, seeds 0-2): 39.0/31.1/28.9 mm plain, 23.5/20.7/19.4 mm refined. The particles settle the
+    # ambiguous directions (which arm is where); the local fit removes their sampling noise.
+    refine: str = "icp"
     optimizer_options: dict = field(default_factory=dict)
 
     @property
@@ -94,6 +102,8 @@ class Tracker:
                                                   prior=prior, backend=self.settings.backend, **kwargs)
         self.scale = self.energy.scale
         self.dynamics = dynamics
+        if self.settings.refine not in ("icp", "none"):
+            raise ValueError(f"refine must be 'icp' or 'none', got {self.settings.refine!r}")
         self.backgrounds = self._background_models()
         self.space = PoseSpace.with_default_scale(body.lower, body.upper, body.dof_names,
                                                   np.isin(np.arange(body.n_dof), body.translation_dofs))
@@ -178,14 +188,18 @@ class Tracker:
         def convert(poses):
             return self.to_relative(self.to_absolute_with(poses, old), new)
 
+        self._map_pose_state(convert)
+        self.history = [convert(h) for h in self.history]
+
+    def _map_pose_state(self, convert, names=POSE_STATE_ATTRIBUTES):
+        """Apply `convert` to every pose array the optimiser keeps between frames."""
         opt = self.optimizer
-        for name in POSE_STATE_ATTRIBUTES:
+        for name in names:
             value = getattr(opt, name, None)
             if isinstance(value, np.ndarray):
                 setattr(opt, name, convert(value))
             elif isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):  # APF: (X, weights)
                 setattr(opt, name, (convert(value[0]),) + value[1:])
-        self.history = [convert(h) for h in self.history]
 
     def to_absolute_with(self, poses, anchor):
         saved, self.anchor = self.anchor, anchor
@@ -224,7 +238,8 @@ class Tracker:
                     translation_half_width=s.init_translation, yaw_dof=None)
             finally:
                 self.energy.weights = weights
-            pose = self.to_absolute(result.estimate)
+            estimate = self._refine(feats, result.estimate) if self.refines else result.estimate
+            pose = self.to_absolute(estimate)
             evaluations = result.evaluations
         else:
             pose = np.asarray(initial_pose, float)
@@ -253,14 +268,31 @@ class Tracker:
         if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
             self.optimizer.set_frame_problem(self._icp_problem(feats))
         result = self.optimizer.track_frame(self._energy_fn, list(self.history))
-        pose = self.to_absolute(result.estimate)
+        estimate, energy, evaluations = result.estimate, result.energy, result.evaluations
+        if self.refines:
+            estimate = self._refine(feats, estimate)
+            energy, evaluations = float(self._energy_fn(estimate[None])[0]), evaluations + 1
+        pose = self.to_absolute(estimate)
         lam = self.settings.color_adaptation
         lam = self.energy.weights.adaptation if lam is None else lam
         if self.uses_color and lam > 0:
             self.energy.adapt_color_model(pose, lam)
-        est = self._record(frame, pose, result.energy, time.perf_counter() - t0, result.evaluations)
+        est = self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
         self._reanchor(self.history[-1])
         return est
+
+    @property
+    def refines(self):
+        return self.settings.refine == "icp" and self.settings.algorithm != "icp"
+
+    def _refine(self, feats, estimate):
+        """ICP from the optimiser's (relative) estimate; the kept particles move by the same step."""
+        from .optimizers.icp import IcpSettings, IcpSolver
+
+        fitted = IcpSolver(self._icp_problem(feats), self.space, IcpSettings()).fit(estimate).pose
+        step = fitted - estimate
+        self._map_pose_state(lambda poses: self.space.clamp(poses + step), PARTICLE_STATE_ATTRIBUTES)
+        return fitted
 
     def _icp_problem(self, feats):
         from .optimizers.icp import IcpProblem

@@ -30,6 +30,8 @@ def add_tracking_options(p):
     p.add_argument("--particles", type=int, default=200, help="particles (ISA/APF); budget = particles x iterations")
     p.add_argument("--iterations", type=int, default=15, help="annealing iterations/layers per frame")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--refine", choices=("icp", "none"), default="icp",
+                   help="local fit of the silhouette outlines after the search (default: icp; none = plain optimiser)")
     p.add_argument("--backend", choices=("auto", "numpy", "fast", "gpu"), default="auto",
                    help="likelihood backend: fast (numba CPU), numpy (reference), gpu (falls back to fast)")
     p.add_argument("--background", choices=("auto", "plate", "median", "mog2", "knn"), default="auto",
@@ -42,7 +44,8 @@ def settings_from_args(args):
         print("markerless_mocap: the GLSL backend is not available in this build; using the fast CPU path",
               file=sys.stderr)
     return TrackingSettings(algorithm=args.algorithm, likelihood=args.likelihood, particles=args.particles,
-                            iterations=args.iterations, seed=args.seed, backend=backend, background=args.background)
+                            iterations=args.iterations, seed=args.seed, backend=backend, background=args.background,
+                            refine=args.refine)
 
 
 def add_arguments(p):
