@@ -87,3 +87,18 @@ def fit_pose_sequence(body, heads, rotations=None, rot_bones=(), x0=None, iterat
         poses.append(x)
         errors.append(err)
     return np.array(poses), np.array(errors)
+
+
+def poses_from_joints(body, names, positions, hold_weight=0.01):
+    """Named bone-head positions (F,J,3), e.g. a gt_joints.npz, -> (F,D) poses and per-frame RMS residual.
+
+    Every bone of the body must have a position; angles the heads do not determine (a neck twist)
+    are held at rest."""
+    names = list(names)
+    missing = [b for b in body.skeleton.bone_names if b not in names]
+    if missing:
+        raise ValueError(f"the joint file has no positions for the bones {', '.join(missing[:6])}"
+                         f"{' ...' if len(missing) > 6 else ''}: a pose can only be fitted to a file that holds "
+                         f"every bone head of the subject (as the sample scenes' gt_joints.npz does)")
+    order = [names.index(b) for b in body.skeleton.bone_names]
+    return fit_pose_sequence(body, np.asarray(positions)[:, order], hold_weight=hold_weight)

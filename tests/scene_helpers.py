@@ -27,13 +27,12 @@ def ground_truth_poses(name="walk"):
     do not see, such as the neck twist, held at rest)."""
     import bpy
 
-    from markerless_mocap.core.pose_fitting import fit_pose_sequence
+    from markerless_mocap.core.pose_fitting import poses_from_joints
     from markerless_mocap.core.results import load_joints
 
     body, _ = load_scene_body(bpy, name)
     names, frames, positions = load_joints(scene_dir(name) / "gt_joints.npz")
-    order = [names.index(n) for n in body.skeleton.bone_names]
-    poses, residual = fit_pose_sequence(body, positions[:, order], hold_weight=0.01)
+    poses, residual = poses_from_joints(body, names, positions)
     return body, frames, poses, residual
 
 

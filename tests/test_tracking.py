@@ -179,3 +179,26 @@ def test_moving_the_root_anchor_keeps_every_stored_pose(walk):
         np.testing.assert_allclose(rotvec_to_matrix(tracker.to_absolute(h)[rd]), rotvec_to_matrix(b[rd]), atol=1e-9)
     np.testing.assert_array_equal(opt.sigma_pred, sigma_pred)
     np.testing.assert_array_equal(opt.sigma_floor, sigma_floor)
+
+
+def test_compare_writes_the_table_and_one_json_line(tmp_path, capsys):
+    out = tmp_path / "compare"
+    code = main(["compare", "--capture", str(WALK), "--frames", "0-2", "--particles", "20", "--iterations", "3",
+                 "--rows", "isa+icp:silh+edge,icp:silh", "--start", "truth", "--out", str(out)])
+    assert code == 0
+    figures = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert [r["label"] for r in figures["rows"]] == ["ISA + ICP refinement (silh+edge)", "ICP (silh)"]
+    assert [r["refine"] for r in figures["rows"]] == ["icp", "none"]
+    print([round(r["mean_mm"], 1) for r in figures["rows"]])
+    assert all(0 < r["mean_mm"] < 60 for r in figures["rows"])  # from the true pose, two frames on
+    table = (out / "compare.md").read_text()
+    assert "ISA + ICP refinement (silh+edge)" in table and "ground truth's first pose" in table
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["icp_silh_seed0", "isa_icp_silh-edge_seed0"]
+
+
+def test_compare_from_truth_needs_every_bone(tmp_path):
+    truth = tmp_path / "few_joints.npz"
+    np.savez(truth, names=np.array(["Hips"]), frames=np.array([0]), positions=np.zeros((1, 1, 3)))
+    with pytest.raises(SystemExit, match="no positions for the bones"):
+        main(["compare", "--capture", str(WALK), "--truth", str(truth), "--frames", "0-1", "--start", "truth",
+              "--rows", "icp:silh", "--out", str(tmp_path / "c")])
