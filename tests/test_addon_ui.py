@@ -72,6 +72,26 @@ def test_disable_removes_everything_and_enable_restores_it(addon_module_name, bp
     assert _module(addon_module_name, "operators")._cli_handle is not None
 
 
+def test_blender_command_tracks_the_open_file(addon_module_name, bpy_module, tmp_path):
+    """`blender --background SUBJECT.blend --command markerless_mocap track ...`: Blender opens the file,
+    then calls the function the add-on registered with the arguments after the name. No --scene:
+    the subject is the open file."""
+    from conftest import SAMPLE_SCENES
+
+    bpy = bpy_module
+    walk = SAMPLE_SCENES / "walk"
+    bpy.ops.wm.open_mainfile(filepath=str(walk / "subject.blend"))
+    cli = _module(addon_module_name, "operators.cli")
+    out = tmp_path / "result"
+    code = cli.blender_command(["track", "--capture", str(walk), "--out", str(out), "--frames", "0-1",
+                                "--particles", "20", "--iterations", "3", "--no-export", "--no-overlays"])
+    assert code == 0
+    joints = np.load(out / "joints.npz")
+    assert list(joints["frames"]) == [0, 1]
+    arm = next(o for o in bpy.context.scene.objects if o.type == "ARMATURE")
+    assert arm.animation_data is not None and arm.animation_data.action is not None  # keyed in the open file
+
+
 # ----------------------------------------------------------------------------- panels
 class _FakeLayout:
     """Stands in for UILayout in background mode and checks what the panels ask it to draw."""
