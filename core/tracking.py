@@ -17,6 +17,7 @@ import numpy as np
 
 from .features import BackgroundModel, compute_view_features
 from .likelihood import default_pose_at
+from .limb_search import limb_dofs, search_limbs
 from .optimizers import PoseSpace, make_optimizer
 from .proxy import make_proxy
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
@@ -44,6 +45,9 @@ class TrackingSettings:
     init_iterations: int = 30
     init_translation: float = 0.25  # metres: half width of the initial search box
     init_yaw: float = float(np.deg2rad(35.0))
+    # Then each limb on its own (core/limb_search.py): the 30-DOF search often leaves an arm in a wrong
+    # basin; walk first frame, seeds 0-3: 46-88 mm -> 14-15 mm, about 15 s more, once per run.
+    init_limbs: bool = True
     color_adaptation: float | None = None  # None: the likelihood's default
     # Shift the particles by the predicted motion between frames: ISA uses the tracker's AR(3) dynamics
     # when it has them (as the paper does), else constant velocity, like APF. Measured on the walk
@@ -236,11 +240,16 @@ class Tracker:
                     self._energy_fn, x0, spread, n=s.init_particles, iterations=s.init_iterations,
                     joints="around", translation_dofs=body.translation_dofs,
                     translation_half_width=s.init_translation, yaw_dof=None)
+                estimate, evaluations = result.estimate, result.evaluations
+                if s.init_limbs:
+                    polish = (lambda pose: self._icp_fit(feats, pose)) if self.refines else None
+                    estimate, _, used = search_limbs(self._energy_fn, self.space, estimate, limb_dofs(body.dofs),
+                                                     seed=s.seed, polish=polish)
+                    evaluations += used
             finally:
                 self.energy.weights = weights
-            estimate = self._refine(feats, result.estimate) if self.refines else result.estimate
+            estimate = self._refine(feats, estimate) if self.refines else estimate
             pose = self.to_absolute(estimate)
-            evaluations = result.evaluations
         else:
             pose = np.asarray(initial_pose, float)
             evaluations = 0
@@ -285,11 +294,14 @@ class Tracker:
     def refines(self):
         return self.settings.refine == "icp" and self.settings.algorithm != "icp"
 
-    def _refine(self, feats, estimate):
-        """ICP from the optimiser's (relative) estimate; the kept particles move by the same step."""
+    def _icp_fit(self, feats, estimate):
         from .optimizers.icp import IcpSettings, IcpSolver
 
-        fitted = IcpSolver(self._icp_problem(feats), self.space, IcpSettings()).fit(estimate).pose
+        return IcpSolver(self._icp_problem(feats), self.space, IcpSettings()).fit(estimate).pose
+
+    def _refine(self, feats, estimate):
+        """ICP from the optimiser's (relative) estimate; the kept particles move by the same step."""
+        fitted = self._icp_fit(feats, estimate)
         step = fitted - estimate
         self._map_pose_state(lambda poses: self.space.clamp(poses + step), PARTICLE_STATE_ATTRIBUTES)
         return fitted

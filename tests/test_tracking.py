@@ -93,8 +93,9 @@ def test_initialisation_from_the_rough_placement(walk):
     est = tracker.initialise(0, rough_pose=rough)
     after = joint_error_mm(body, est.pose, gt[0])
     print(f"initialisation: {before:.0f} mm -> {after:.0f} mm")
-    # measured 47 mm with this small search (300 x 20) and the ICP refinement; 116 mm without it
-    assert after < 0.35 * before
+    # measured with this small global search (300 x 20) and the ICP refinement: 16 mm with the limb
+    # search after it, 47 mm without (init_limbs=False); 116 mm with neither
+    assert after < 30
 
 
 def _track_cli(out, frames, *extra):
