@@ -2,8 +2,9 @@
 
 Terms (all unweighted values are normalised averages, O(1)):
   silh     binary XOR silhouette, per view #(T xor I) / area of the reference-pose template, mean over views (7a)
-  silh_ch  Chamfer silhouette, per view 1/(2|T|) sum_T D_I + 1/(2|I|) sum_I D_T, mean over views (7b, A11);
-           distances in capture-resolution pixels, so lambda does not change with the energy resolution [DESIGN]
+  silh_ch  Chamfer silhouette, per view 1/(2|T|) sum_T D_I + 1/(2|I|) sum_I min(D_T, 20 px), mean over views
+           (7b, A11; the truncation is a DESIGN addition, see SILH_CH_CAP_PX); distances in capture-resolution
+           pixels, so lambda does not change with the energy resolution [DESIGN]
   edge     binary edge, (1/Y) sum_v #(template part-boundary pixels not on an image edge), Y = sum_v boundary
            pixels of the reference pose (eq. 9, A10)
   edge_ch  Chamfer edge, like edge with the edge distance truncated at 20 px (x scale) divided by that cap,
@@ -46,6 +47,11 @@ from .features.view_features import EDGE_DT_CAP_PX, distance_to_mask, resize_mas
 from .render import reference as render_reference
 
 ENERGY_SCALE = 0.5
+# The Chamfer silhouette's second sum counts each observed pixel's distance to the model up to this many
+# capture pixels [DESIGN]. Untruncated, foreground far from the body (a box sliding, a lamp swinging in the
+# playground scene: observed pixels 50-60 px from the true mask on average in some views) dominates
+# the term and pulls the model towards it; truncated, such blobs add a constant.
+SILH_CH_CAP_PX = 20.0
 MIN_PART_PIXELS = 20  # colour: parts seen less than this (all views together) contribute (1 - BC) = 1
 TERM_NAMES = ("silh", "silh_ch", "edge", "edge_ch", "color", "anat")
 
@@ -148,7 +154,7 @@ def frame_targets(features, cameras, scale):
         sil[c, :h, :w], sil_dt[c, :h, :w], edge_off[c, :h, :w], edge_dt[c, :h, :w], bins[c, :h, :w] = \
             _resample_view(feat, w, h, scale, c)
     return render.FrameTargets([c.width for c in cameras], [c.height for c in cameras], sil, sil_dt, edge_off,
-                               edge_dt, bins)
+                               edge_dt, bins, chamfer_cap=SILH_CH_CAP_PX * scale)
 
 
 # ---------------------------------------------------------------------------------------- colour helpers
@@ -323,7 +329,8 @@ class EnergyModel:
         diag = np.hypot(self.targets.widths, self.targets.heights)[None, :].astype(np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
             first = np.where(n_t > 0, stats[..., render.SUM_DI] / (2 * n_t), 0.0)
-            second = np.where(n_t > 0, stats[..., render.SUM_DT] / (2 * n_obs), 0.5 * diag)  # no template: far
+            far = np.minimum(diag, self.targets.chamfer_cap)  # no template: every observed pixel at the cap
+            second = np.where(n_t > 0, stats[..., render.SUM_DT] / (2 * n_obs), 0.5 * far)
         second = np.where(n_obs > 0, second, 0.0)
         return ((first + second) / self.scale).mean(axis=1)
 

@@ -1,4 +1,6 @@
 """The rasteriser and its statistics: hand-made cases with exact answers, and the fast path against the reference."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -187,15 +189,15 @@ def test_project_views_matches_camera_projection_with_distortion():
 
 
 # ---------------------------------------------------------------------------------------- statistics
-def _targets_with_square(width, height, rows, cols):
+def _targets_with_square(width, height, rows, cols, chamfer_cap=np.inf):
     import cv2
 
     sil = np.zeros((1, height, width), np.uint8)
     sil[0, rows, cols] = 1
     dt = cv2.distanceTransform(1 - sil[0], cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[None].astype(float)
     zeros = np.zeros((1, height, width))
-    return render.FrameTargets([width], [height], sil, dt, np.ones_like(sil), zeros, np.zeros((1, height, width, 2),
-                                                                                               np.uint8))
+    return render.FrameTargets([width], [height], sil, dt, np.ones_like(sil), zeros,
+                               np.zeros((1, height, width, 2), np.uint8), chamfer_cap=chamfer_cap)
 
 
 @pytest.mark.parametrize("backend", ["numpy", "fast"])
@@ -215,6 +217,19 @@ def test_square_against_shifted_square_has_known_xor_and_chamfer_sums(backend):
     assert s[render.BOUNDARY] == 36
 
 
+@pytest.mark.parametrize("backend", ["numpy", "fast"])
+def test_chamfer_cap_truncates_each_observed_pixel_distance(backend):
+    # As above, with observed pixels counted up to 2 px: columns 20..23 give 1, 2, 2, 2 per row.
+    uv, z, faces = square_uv(9.5, 4.5, 19.5, 14.5)
+    targets = _targets_with_square(40, 24, slice(5, 15), slice(14, 24), chamfer_cap=2.0)
+    stats, _ = render.statistics(uv[None, None], z[None, None], faces, np.array([1, 1], np.int16), targets,
+                                 backend=backend)
+    assert stats[0, 0, render.SUM_DT] == pytest.approx(10 * (1 + 2 + 2 + 2))
+    assert stats[0, 0, render.SUM_DI] == pytest.approx(10 * (4 + 3 + 2 + 1))  # the other sum is not capped
+    with pytest.raises(render.RenderInputError, match="chamfer_cap"):
+        _targets_with_square(40, 24, slice(5, 15), slice(14, 24), chamfer_cap=0.0)
+
+
 def test_fast_path_equals_reference_on_random_poses_and_views_of_different_sizes():
     verts, faces, labels = sphere_mesh()
     rng = np.random.default_rng(3)
@@ -230,7 +245,8 @@ def test_fast_path_equals_reference_on_random_poses_and_views_of_different_sizes
     poses.append(verts * 0.2 + [2.4, 0.3, 0.4])  # partly behind camera a
     poses.append(verts + [0, 0, 10])  # out of every view
     uv, z = render.project_views(np.array(poses), cams)
-    for cull in (0, 1, -1):
+    capped = dataclasses.replace(targets, chamfer_cap=4.0)
+    for cull, targets in ((0, targets), (1, targets), (-1, targets), (0, capped)):
         s_ref, h_ref = reference.statistics(uv, z, faces, labels, targets, True, 3, cull)
         s_fast, h_fast = fast.statistics(uv, z, faces, labels, targets, True, 3, cull)
         assert np.array_equal(s_ref[..., render.TEMPLATE], s_fast[..., render.TEMPLATE])

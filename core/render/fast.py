@@ -142,8 +142,9 @@ def _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_h
 
 
 @_jit()
-def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt):
-    """Sum over observed pixels of the 3-4 chamfer distance (pixels) to the template.
+def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt, cap_units):
+    """Sum over observed pixels of the 3-4 chamfer distance (pixels) to the template, each capped at
+    cap_units / 3 pixels.
 
     dt is (H+2, W+2): image pixel (y, x) lives at dt[y+1, x+1], so the ring of _BIG around the box
     replaces every bounds test in the two passes.
@@ -166,13 +167,13 @@ def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt):
         for x in range(ux1 + 1, ux0, -1):
             v = min(dt[y, x], dt[y + 1, x - 1] + 4, dt[y + 1, x] + 3, dt[y + 1, x + 1] + 4, dt[y, x + 1] + 3)
             dt[y, x] = v
-            total += v * obs[y - 1, x - 1]  # obs is 0 outside the observed silhouette
+            total += min(v, cap_units) * obs[y - 1, x - 1]  # obs is 0 outside the observed silhouette
     return total / 3.0
 
 
 @_jit()
 def _one_task(q, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_dt, ab_bins, obox,
-              need_chamfer, need_color, labels, zbuf, dt, row_lo, row_hi, stats_out, hist_out):
+              need_chamfer, cap_units, need_color, labels, zbuf, dt, row_lo, row_hi, stats_out, hist_out):
     # Template box: the pixel centres the usable vertices span (every drawn pixel lies inside).
     big = 1 << 62
     xmin, xmax, ymin, ymax = big, -big, big, -big
@@ -229,12 +230,13 @@ def _one_task(q, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_
     stats_out[BOUNDARY_OFF] = n_off
     stats_out[SUM_EDGE_DT] = sum_edt
     if need_chamfer and n_t > 0 and obox[1] >= obox[0]:
-        stats_out[SUM_DT] = _chamfer_sum(labels, ty0, ty1, tx0, tx1, sil, obox[0], obox[1], obox[2], obox[3], dt)
+        stats_out[SUM_DT] = _chamfer_sum(labels, ty0, ty1, tx0, tx1, sil, obox[0], obox[1], obox[2], obox[3], dt,
+                                          cap_units)
 
 
 @_jit(parallel=True)
 def _statistics_kernel(q, iz, faces, face_label, cull, widths, heights, sil, sil_dt, edge_off, edge_dt, ab_bins,
-                       obox, need_chamfer, need_color, n_chunks, stats, hist):
+                       obox, need_chamfer, cap_units, need_color, n_chunks, stats, hist):
     P, C = q.shape[0], q.shape[1]
     H, W = sil.shape[1], sil.shape[2]
     n_tasks = P * C
@@ -250,7 +252,7 @@ def _statistics_kernel(q, iz, faces, face_label, cull, widths, heights, sil, sil
             p = task // C
             c = task % C
             _one_task(q[p, c], iz[p, c], faces, face_label, cull, widths[c], heights[c], sil[c], sil_dt[c],
-                      edge_off[c], edge_dt[c], ab_bins[c], obox[c], need_chamfer, need_color, labels, zbuf, dt,
+                      edge_off[c], edge_dt[c], ab_bins[c], obox[c], need_chamfer, cap_units, need_color, labels, zbuf, dt,
                       row_lo, row_hi, stats[p, c], hist[p, c])
 
 
@@ -342,7 +344,7 @@ def statistics_from_snapped(q, iz, faces, face_label, targets: FrameTargets, nee
                            np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(face_label, dtype=np.int16),
                            int(cull), targets.widths, targets.heights, targets.silhouette, targets.silhouette_dt,
                            targets.edge_off, targets.edge_dt, targets.ab_bins, targets.observed_box, bool(need_chamfer),
-                           bool(n_parts), n_chunks, stats, hist)
+                           np.int64(targets.chamfer_cap_units), bool(n_parts), n_chunks, stats, hist)
     if not n_parts:
         hist = hist[:, :, :0]
     return stats, hist

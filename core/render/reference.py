@@ -60,6 +60,9 @@ class FrameTargets:
     edge_off: np.ndarray  # (C,H,W) uint8, E_v: 0 on image edges, 1 elsewhere
     edge_dt: np.ndarray  # (C,H,W) float64, truncated distance to the nearest image edge (energy pixels)
     ab_bins: np.ndarray  # (C,H,W,2) uint8, histogram bin of the diffused a and b channels
+    # SUM_DT counts each observed pixel's distance to the template up to this many energy pixels (rounded
+    # to the 3-4 chamfer's 1/3 px), so foreground far from the body adds a constant, not a pull.
+    chamfer_cap: float = np.inf
 
     def __post_init__(self):
         self.widths = np.asarray(self.widths, dtype=np.int64)
@@ -69,6 +72,8 @@ class FrameTargets:
         self.edge_off = np.ascontiguousarray(self.edge_off, dtype=np.uint8)
         self.edge_dt = np.ascontiguousarray(self.edge_dt, dtype=np.float64)
         self.ab_bins = np.ascontiguousarray(self.ab_bins, dtype=np.uint8)
+        if not self.chamfer_cap > 0:
+            raise RenderInputError(f"FrameTargets.chamfer_cap must be > 0 pixels, got {self.chamfer_cap}")
         C, H, W = self.silhouette.shape
         for name in ("silhouette_dt", "edge_off", "edge_dt"):
             if getattr(self, name).shape != (C, H, W):
@@ -90,6 +95,11 @@ class FrameTargets:
     @property
     def n_views(self):
         return len(self.widths)
+
+    @property
+    def chamfer_cap_units(self) -> int:
+        """chamfer_cap in the 3-4 chamfer's integer units (3 per pixel); no cap is 2^30 units."""
+        return int(min(round(3.0 * self.chamfer_cap), 1 << 30)) if np.isfinite(self.chamfer_cap) else 1 << 30
 
 
 def ab_to_bins(ab):
@@ -262,7 +272,7 @@ def view_statistics(labels, targets: FrameTargets, view, need_chamfer=True, n_pa
     stats[OVERLAP] = (sil & obs).sum()
     stats[SUM_DI] = targets.silhouette_dt[view, :h, :w][sil].sum()
     if need_chamfer and sil.any() and obs.any():
-        stats[SUM_DT] = chamfer_34(sil)[obs].sum()
+        stats[SUM_DT] = np.minimum(chamfer_34(sil)[obs], targets.chamfer_cap_units / 3.0).sum()
     stats[BOUNDARY] = boundary.sum()
     stats[BOUNDARY_OFF] = targets.edge_off[view, :h, :w][boundary].sum()
     stats[SUM_EDGE_DT] = targets.edge_dt[view, :h, :w][boundary].sum()
