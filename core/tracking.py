@@ -57,8 +57,17 @@ class TrackingSettings:
     # [DESIGN] The paper's captures run at 50-60 fps; ours at 30 fps move twice as far per frame,
     # more than the inter-frame mutation alone covers (measured: without it ISA drifts off a walk).
     velocity: bool = True
-    # Inter-frame mutation floor sigma_pred as a multiple of the per-DOF scale (20 mm, 5 degrees).
+    # Inter-frame mutation floor sigma_pred as a multiple of the per-DOF scale (20 mm, 5 degrees), for APF.
     prediction_spread: float = 0.5
+    # ISA's own spreads: mutation covariance c x the particles' sample covariance, inter-frame covariance
+    # c_pred x that of the kept particles plus sigma_pred = isa_prediction_spread x scale. The search
+    # wastes its budget when it keeps exploring: measured on the walk (ISA s+e 200x15, frames 1-19 from the
+    # true first pose, seeds 0-5, error over every bone head), c, c_pred, spread = 0.5, 1.0, 0.5: 46.2 mm;
+    # 0.3, 1.0, 0.5: 39.2; 0.3, 1.0, 0.25: 37.8; 0.3, 0.5, 0.25: 34.5; 0.3, 0.3, 0.15: 37.4; spread 1.0:
+    # 80.6; a diagonal covariance: 127. The first-frame search keeps the class defaults.
+    isa_mutation: float = 0.3
+    isa_prediction_covariance: float = 0.5
+    isa_prediction_spread: float = 0.25
     # ISA annealing: "ess" picks each beta so the effective sample size falls from 0.5 to 0.1 of the
     # particles (algorithms.md 2.4, the documented fallback); "polynomial" is beta0 (m+1)^b with the
     # [LIT?] constants 8 and 0.7. Measured on the walk scene (ISA s+e, 20 frames from the true first
@@ -123,6 +132,10 @@ class Tracker:
         if self.settings.algorithm == "isa":
             for key, value in self._schedule_kwargs().items():
                 kw.setdefault(key, value)
+        if self.settings.algorithm == "isa":
+            kw.setdefault("c", self.settings.isa_mutation)
+            kw.setdefault("c_pred", self.settings.isa_prediction_covariance)
+            kw.setdefault("sigma_pred", self.settings.isa_prediction_spread * self.body.scale)
         if self.settings.algorithm in ("isa", "apf"):
             kw.setdefault("n", self.settings.particles)
             kw.setdefault("velocity", self.settings.velocity)
