@@ -77,8 +77,10 @@ class TrackingSettings:
     # global stochastic optimisation, then a local fit]: "icp" runs ICP with twists (silhouette rims) from
     # the optimiser's estimate and moves the particles with it; "none" keeps the plain optimiser, as the
     # paper's comparison does. Measured on the walk (ISA s+e 200x15, frames 1-19 from the true first
-    # pose, seeds 0-2): 39.0/31.1/28.9 mm plain, 23.5/20.7/19.4 mm refined. The particles settle the
-    # ambiguous directions (which arm is where); the local fit removes their sampling noise.
+    # pose, seeds 0-2, with the older, wider ISA spreads): 39.0/31.1/28.9 mm plain, 23.5/20.7/19.4 mm
+    # refined. With the current spreads (compare from the search, seeds 0-2) walk 28.6 -> 20.8 mm, and the
+    # playground ties at 17.9 mm. The particles settle the ambiguous directions (which arm is where); the
+    # local fit then gets below the truth's energy where the particles stop short.
     refine: str = "icp"
     optimizer_options: dict = field(default_factory=dict)
 
