@@ -130,18 +130,18 @@ class Tracker:
 
     # ------------------------------------------------------------------ set-up
     def _optimizer_kwargs(self):
-        kw = dict(self.settings.optimizer_options)
-        if self.settings.algorithm == "isa":
+        s = self.settings
+        kw = dict(s.optimizer_options)
+        if s.algorithm == "isa":
             for key, value in self._schedule_kwargs().items():
                 kw.setdefault(key, value)
-        if self.settings.algorithm == "isa":
-            kw.setdefault("c", self.settings.isa_mutation)
-            kw.setdefault("c_pred", self.settings.isa_prediction_covariance)
-            kw.setdefault("sigma_pred", self.settings.isa_prediction_spread * self.body.scale)
-        if self.settings.algorithm in ("isa", "apf"):
-            kw.setdefault("n", self.settings.particles)
-            kw.setdefault("velocity", self.settings.velocity)
-            kw.setdefault("sigma_pred", self.settings.prediction_spread * self.body.scale)
+            kw.setdefault("c", s.isa_mutation)
+            kw.setdefault("c_pred", s.isa_prediction_covariance)
+        if s.algorithm in ("isa", "apf"):
+            spread = s.isa_prediction_spread if s.algorithm == "isa" else s.prediction_spread
+            kw.setdefault("n", s.particles)
+            kw.setdefault("velocity", s.velocity)
+            kw.setdefault("sigma_pred", spread * self.body.scale)
         if self.settings.algorithm == "isa" and self.settings.velocity and self.dynamics is not None:
             kw.setdefault("dynamics", self.dynamics)
         if self.settings.algorithm in ("pf", "fsa") and self.dynamics is not None:
