@@ -142,7 +142,7 @@ class Tracker:
             kw.setdefault("n", s.particles)
             kw.setdefault("velocity", s.velocity)
             kw.setdefault("sigma_pred", spread * self.body.scale)
-        if self.settings.algorithm == "isa" and self.settings.velocity and self.dynamics is not None:
+        if self.settings.algorithm in ("isa", "apf") and self.settings.velocity and self.dynamics is not None:
             kw.setdefault("dynamics", self.dynamics)
         if self.settings.algorithm in ("pf", "fsa") and self.dynamics is not None:
             kw.setdefault("dynamics", self.dynamics)

@@ -12,7 +12,7 @@ from markerless_mocap.core.optimizers import (EnergyOutputError, OptimizerInputE
                                               UnknownOptimizerError, available_optimizers, make_optimizer)
 from markerless_mocap.core.optimizers.apf import solve_beta, survival_rate
 from markerless_mocap.core.optimizers.base import (CountingEnergy, systematic_resample, weighted_covariance)
-from markerless_mocap.core.optimizers.dynamics import DampedConstantVelocity, LinearAR3
+from markerless_mocap.core.optimizers.dynamics import DampedConstantVelocity, LinearAR3, predicted_displacement
 from markerless_mocap.core.optimizers.isa import epsilon_select
 
 D = 30
@@ -374,6 +374,37 @@ def test_pf_predicts_with_the_given_dynamics():
 
     e_drift, e_still = track(velocity), track(np.zeros(D))
     assert e_drift < 0.5 < 1.0 < e_still, (e_drift, e_still)
+
+
+def test_predicted_displacement_uses_the_dynamics_mean_else_constant_velocity():
+    a, b = np.array([0.0, 1.0]), np.array([0.5, 2.0])
+    drift = LinearAR3(np.tile([1.0, 0.0, 0.0], (2, 1)), np.array([0.3, -0.1]), 0.1)
+    assert predicted_displacement([a], drift) is None        # nothing to predict from yet
+    assert np.allclose(predicted_displacement([a, b], None), [0.5, 1.0])
+    assert np.allclose(predicted_displacement([a, b], drift), [0.3, -0.1])
+
+
+@pytest.mark.parametrize("name", ["isa", "apf"])
+def test_isa_and_apf_move_their_particles_by_the_dynamics_prediction(name):
+    # On a flat energy every particle weighs the same, so two runs with one seed draw the same random
+    # numbers and differ only by the inter-frame shift. The history stands still (constant velocity
+    # predicts no motion); the drift model predicts +delta.
+    delta = 3.0 * S
+    drift = LinearAR3(np.tile([1.0, 0.0, 0.0], (D, 1)), delta, 0.1 * S)
+
+    def flat(X):
+        return np.zeros(len(X))
+
+    space = make_space(limit=np.inf)                         # no limit redraws to tell the runs apart
+
+    def second_frame(dynamics):
+        opt = make_optimizer(name, space, seed=0, velocity=True, dynamics=dynamics)
+        opt.start(np.zeros(D))
+        opt.track_frame(flat, [np.zeros(D)])
+        return opt.track_frame(flat, [np.zeros(D), np.zeros(D)]).estimate / S
+
+    moved, still = second_frame(drift), second_frame(None)
+    assert np.allclose(moved - still, 3.0, atol=1e-6), moved - still
 
 
 # ------------------------------------------------------------------ FSA specifics

@@ -12,6 +12,7 @@ import numpy as np
 
 from .base import (RESAMPLERS, CountingEnergy, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
                    gaussian_mutation, particle_sets, weighted_covariance)
+from .dynamics import checked_dynamics, predicted_displacement
 
 
 def survival_rate(V: np.ndarray, beta: float) -> float:
@@ -52,15 +53,20 @@ class AnnealedParticleFilter(Optimizer):
     diag(sigma_pred^2) (DESIGN: the same inter-frame spread as ISA, otherwise a concentrated set
     cannot follow motion). "fixed" -> P_m = alpha^(layer) * P0 + floor, P0 = diag((p0_scale*s)^2),
     broadest in the first layer.
+
+    velocity: shift the carried-over set by the predicted displacement between frames, the same
+    prediction as ISA's (the mean of `dynamics`, an AR(3) model, when given; else constant velocity).
     """
     name = "apf"
 
     def __init__(self, space: PoseSpace, budget: int | None = None, seed: int = 0, *, n: int = 200,
                  M: int | None = None, alpha: float = 0.5, covariance: str = "adaptive", sigma_floor=None,
                  sigma_pred=None, p0_scale: float = 1.0, resampling: str = "multinomial",
-                 estimate: str = "mean", init_spread: float = 0.5, velocity: bool = False, **params):
+                 estimate: str = "mean", init_spread: float = 0.5, velocity: bool = False, dynamics=None,
+                 **params):
         super().__init__(space, budget, seed, **params)
         self.velocity = bool(velocity)
+        self.dynamics = checked_dynamics(dynamics, "APF")
         self.n, self.M = particle_sets(self, n, M, budget, "APF", "layer")
         if not 0 < alpha < 1:
             raise OptimizerInputError(f"APF survival rate alpha must lie in (0, 1), got {alpha}")
@@ -97,8 +103,9 @@ class AnnealedParticleFilter(Optimizer):
 
     def _search(self, energy: CountingEnergy, history):
         X, pi = self.state if self.state is not None else self._initial_set(history)
-        if self.state is not None and self.velocity and len(history) >= 2:
-            X = X + (history[-1] - history[-2])  # same constant-velocity shift as ISA's option
+        if self.state is not None and self.velocity:   # the same prediction as ISA's
+            shift = predicted_displacement(history, self.dynamics)
+            X = X if shift is None else X + shift
         resample = RESAMPLERS[self.resampling]
         floor_cov = np.diag(self.sigma_floor ** 2)
         betas, rates, unsolved = [], [], 0

@@ -30,6 +30,23 @@ class ConditionalGaussianDynamics(ABC):
         return mean[0]
 
 
+def checked_dynamics(dynamics, who: str):
+    """`dynamics` if it can predict from a history of estimates (or None), else a clear error."""
+    if dynamics is not None and not hasattr(dynamics, "predict_from_history"):
+        raise OptimizerInputError(f"{who} dynamics must be a ConditionalGaussianDynamics (predict_from_history)")
+    return dynamics
+
+
+def predicted_displacement(history: Sequence[np.ndarray], dynamics: ConditionalGaussianDynamics | None) -> np.ndarray | None:
+    """How far the next pose is predicted to move from the last estimate: the mean of `dynamics`
+    (AR(3)) when given, else constant velocity; None before two estimates exist."""
+    if len(history) < 2:
+        return None
+    if dynamics is not None:
+        return dynamics.predict_from_history(history) - np.asarray(history[-1], float)
+    return np.asarray(history[-1], float) - np.asarray(history[-2], float)
+
+
 def _per_dof(name: str, value, d: int | None) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if arr.ndim > 1 or (d is not None and arr.ndim == 1 and arr.shape[0] != d):

@@ -13,6 +13,7 @@ import numpy as np
 
 from .base import (CountingEnergy, FrameResult, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
                    gaussian_mutation, particle_sets, systematic_resample, weighted_covariance)
+from .dynamics import checked_dynamics, predicted_displacement
 
 
 def epsilon_select(X: np.ndarray, g: np.ndarray, pi: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -100,9 +101,7 @@ class InteractingSimulatedAnnealing(Optimizer):
             np.asarray(sigma_pred, float), (d,)).copy()
         self.velocity, self.estimate_mode, self.covariance = bool(velocity), estimate, covariance
         self.init_spread, self.elitist = float(init_spread), bool(elitist)
-        if dynamics is not None and not hasattr(dynamics, "predict_from_history"):
-            raise OptimizerInputError("ISA dynamics must be a ConditionalGaussianDynamics (predict_from_history)")
-        self.dynamics = dynamics
+        self.dynamics = checked_dynamics(dynamics, "ISA")
         self.particles: np.ndarray | None = None
 
     @property
@@ -173,12 +172,9 @@ class InteractingSimulatedAnnealing(Optimizer):
             return self.space.sample_within_limits(
                 lambda rows, g: centre + g.standard_normal((rows.shape[0], d)) * std, self.rng, n)
         P = self.particles
-        shift = np.zeros(d)
-        if self.velocity and len(history) >= 2:
-            if self.dynamics is not None:         # the paper: predicted by the AR(3) model (seed 4.2)
-                shift = self.dynamics.predict_from_history(history) - history[-1]
-            else:
-                shift = history[-1] - history[-2]     # constant-velocity prediction minus x_{t-1}
+        # the paper predicts with its AR(3) model (seed 4.2); constant velocity without one
+        shift = predicted_displacement(history, self.dynamics) if self.velocity else None
+        shift = np.zeros(d) if shift is None else shift
         cov = self.c_pred * weighted_covariance(P) + np.diag(self.sigma_pred ** 2)
         return gaussian_mutation(self.space, P + shift, cov, self.rng)
 
