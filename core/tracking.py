@@ -49,11 +49,13 @@ class TrackingSettings:
     # basin; walk first frame, seeds 0-3: 46-88 mm -> 14-15 mm, about 15 s more, once per run.
     init_limbs: bool = True
     color_adaptation: float | None = None  # None: the likelihood's default
-    # Shift the particles by the predicted motion between frames: ISA uses the tracker's AR(3) dynamics
-    # when it has them (as the paper does), else constant velocity, like APF. Measured on the walk
+    # Shift the particles by the predicted motion between frames: ISA and APF use the tracker's AR(3)
+    # dynamics when it has them (as the paper does for ISA), else constant velocity. Measured on the walk
     # (ISA s+e 200x15, frames 1-19 from the true first pose): constant velocity 55.8/69.0/52.4 mm
     # (seeds 0-2), AR(3) 35.1/38.4/42.3/42.9/61.1/42.2 mm (seeds 0-5); constant velocity extrapolates the
-    # noise of weakly observed DOFs (arm twist, elbow), so the arms drifted frame after frame.
+    # noise of weakly observed DOFs (arm twist, elbow), so the arms drifted frame after frame. APF
+    # (s^Ch+c, compare from the search, seeds 0-2): constant velocity 62.6 / 71.1 mm (walk / playground),
+    # AR(3) 51.7 / 59.1 mm.
     # [DESIGN] The paper's captures run at 50-60 fps; ours at 30 fps move twice as far per frame,
     # more than the inter-frame mutation alone covers (measured: without it ISA drifts off a walk).
     velocity: bool = True
