@@ -63,7 +63,9 @@ class TrackingSettings:
     # more than the inter-frame mutation alone covers (measured: without it ISA drifts off a walk).
     velocity: bool = True
     # Inter-frame mutation floor sigma_pred as a multiple of the per-DOF scale (20 mm, 5 degrees), for APF.
-    prediction_spread: float = 0.5
+    # Like ISA's, tighter tracks better (APF s^Ch+c with AR(3), compare from the search, seeds 0-2): 0.5 gave
+    # walk 51.7 / playground 59.1 mm, 0.25 gives 49.5 / 47.4 mm.
+    prediction_spread: float = 0.25
     # ISA's own spreads: mutation covariance c x the particles' sample covariance, inter-frame covariance
     # c_pred x that of the kept particles plus sigma_pred = isa_prediction_spread x scale. The search
     # wastes its budget when it keeps exploring: measured on the walk (ISA s+e 200x15, frames 1-19 from the
