@@ -35,7 +35,7 @@ class TrackingSettings:
     likelihood: str = "silh+edge"
     # The paper's split of its 3000 evaluations per frame. The same budget as 100 x 30 annealed the walk's
     # arms better (plain ISA s+e, compare from the search: 27.2 mm against 30.5 mm over seeds 0-8) and the
-    # playground about as well (18.2 against 17.6 mm over seeds 0-5): `--particles 100 --iterations 30`.
+    # playground about as well (18.0 against 17.8 mm over seeds 0-8): `--particles 100 --iterations 30`.
     particles: int = 200
     iterations: int = 15
     seed: int = 0
