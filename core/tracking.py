@@ -149,9 +149,9 @@ class Tracker:
             kw.setdefault("n", s.particles)
             kw.setdefault("velocity", s.velocity)
             kw.setdefault("sigma_pred", spread * self.body.scale)
-        if self.settings.algorithm in ("isa", "apf") and self.settings.velocity and self.dynamics is not None:
-            kw.setdefault("dynamics", self.dynamics)
-        if self.settings.algorithm in ("pf", "fsa") and self.dynamics is not None:
+            if s.velocity and self.dynamics is not None:  # the inter-frame shift's prediction
+                kw.setdefault("dynamics", self.dynamics)
+        if s.algorithm in ("pf", "fsa") and self.dynamics is not None:
             kw.setdefault("dynamics", self.dynamics)
         return kw
 

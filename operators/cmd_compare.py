@@ -68,8 +68,8 @@ def _rows(spec, particles, iterations):
     rows = []
     for row in DEFAULT_ROWS if not spec else [_parse_row(item) for item in spec.split(",")]:
         if row.split == "half":
-            row = row._replace(split=(particles // 2, iterations * 2))
-            row = row._replace(label=f"{row.label}, {row.split[0]} x {row.split[1]}")
+            n, m = particles // 2, iterations * 2
+            row = row._replace(split=(n, m), label=f"{row.label}, {n} x {m}")
         rows.append(row)
         if row.split is not None and row.split[0] * row.split[1] != budget:
             raise SystemExit(f"compare: row {row.label!r} runs {row.split[0]} x {row.split[1]} = "

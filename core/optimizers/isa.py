@@ -174,9 +174,8 @@ class InteractingSimulatedAnnealing(Optimizer):
         P = self.particles
         # the paper predicts with its AR(3) model (seed 4.2); constant velocity without one
         shift = predicted_displacement(history, self.dynamics) if self.velocity else None
-        shift = np.zeros(d) if shift is None else shift
         cov = self.c_pred * weighted_covariance(P) + np.diag(self.sigma_pred ** 2)
-        return gaussian_mutation(self.space, P + shift, cov, self.rng)
+        return gaussian_mutation(self.space, P if shift is None else P + shift, cov, self.rng)
 
     def _search(self, energy: CountingEnergy, history: list[np.ndarray]):
         X = self._initial_particles(history)
