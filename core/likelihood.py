@@ -43,7 +43,9 @@ import cv2
 import numpy as np
 
 from . import render
+from .features.learned import CROP_MARGIN
 from .features.view_features import EDGE_DT_CAP_PX, distance_to_mask, resize_mask
+from .keypoints import KeypointTargets, keypoint_energy, rig_keypoints
 from .render import reference as render_reference
 
 ENERGY_SCALE = 0.5
@@ -52,8 +54,11 @@ ENERGY_SCALE = 0.5
 # playground scene: observed pixels 50-60 px from the true mask on average in some views) dominates
 # the term and pulls the model towards it; truncated, such blobs add a constant.
 SILH_CH_CAP_PX = 20.0
+KEYPOINT_WEIGHT = 20.0  # lambda_kp [DESIGN]: see README, "learned evidence"
 MIN_PART_PIXELS = 20  # colour: parts seen less than this (all views together) contribute (1 - BC) = 1
-TERM_NAMES = ("silh", "silh_ch", "edge", "edge_ch", "color", "anat")
+TERM_NAMES = ("silh", "silh_ch", "edge", "edge_ch", "color", "keypoint", "anat")
+NON_IMAGE_TERMS = ("keypoint", "anat")  # computed from joints, not from the rasterised model
+MASK_SOURCES = ("background", "learned")
 
 
 class LikelihoodError(ValueError):
@@ -67,8 +72,20 @@ class LikelihoodWeights:
     edge: float = 0.0
     edge_ch: float = 0.0
     color: float = 0.0
+    keypoint: float = 0.0
     anat: float = 0.0
     adaptation: float = 0.0  # colour model adaptation speed lambda of eq. 12
+    # Where the silhouette terms' observed mask comes from: background subtraction (the paper) or the
+    # learned person mask (core/features/learned.py).
+    mask: str = "background"
+
+    def __post_init__(self):
+        if self.mask not in MASK_SOURCES:
+            raise LikelihoodError(f"mask must be one of {MASK_SOURCES}; got {self.mask!r}")
+
+    @property
+    def needs_learned_evidence(self):
+        return self.mask == "learned" or self.keypoint != 0
 
     def active_terms(self):
         return [f.name for f in fields(self) if f.name in TERM_NAMES and getattr(self, f.name) != 0]
@@ -80,6 +97,13 @@ LIKELIHOODS: dict[str, LikelihoodWeights] = {
     "silh+edgech": LikelihoodWeights(silh=30.0, edge_ch=2.0, anat=2.0),
     "silhch+color": LikelihoodWeights(silh_ch=2.0, color=40.0, anat=2.0, adaptation=0.2),
     "silhch": LikelihoodWeights(silh_ch=2.0, anat=2.0),
+    # Learned evidence (core/features/learned.py): "l" silhouettes use the learned person mask,
+    # "kp" adds the 2D keypoint term (core/keypoints.py).
+    "lsilh+edge": LikelihoodWeights(silh=30.0, edge=2.0, anat=2.0, mask="learned"),
+    "silh+edge+kp": LikelihoodWeights(silh=30.0, edge=2.0, keypoint=KEYPOINT_WEIGHT, anat=2.0),
+    "lsilh+edge+kp": LikelihoodWeights(silh=30.0, edge=2.0, keypoint=KEYPOINT_WEIGHT, anat=2.0, mask="learned"),
+    "lsilh+kp": LikelihoodWeights(silh=30.0, keypoint=KEYPOINT_WEIGHT, anat=2.0, mask="learned"),
+    "kp": LikelihoodWeights(keypoint=KEYPOINT_WEIGHT, anat=2.0),
 }
 
 
@@ -211,6 +235,8 @@ class EnergyModel:
         self._cull_request = cull
         self.cull = 0 if cull == "auto" else int(cull)
         self.targets = None
+        self.keypoints = None   # KeypointTargets of the current frame (learned landmarks)
+        self._rig_points = None
         self.color_model = None  # (S,2,K) normalised histograms
         self.color_count = None  # (S,) sample sizes M
         self.set_reference_pose(body.default_pose())
@@ -262,9 +288,31 @@ class EnergyModel:
         self.reference_area = stats[0, :, render.TEMPLATE].copy()
         self.reference_boundary = float(stats[0, :, render.BOUNDARY].sum())
 
-    def set_frame(self, features):
-        """One ViewFeatures per camera (capture resolution or already at the energy resolution)."""
+    def set_frame(self, features, evidence=None):
+        """One ViewFeatures per camera (capture resolution or already at the energy resolution), and the
+        learned evidence (one ViewEvidence per camera) when the likelihood uses keypoints."""
         self.targets = frame_targets(features, self.cameras, self.scale)
+        if evidence is not None:
+            if len(evidence) != len(self.cameras):
+                raise LikelihoodError(f"got learned evidence for {len(evidence)} views; the model has "
+                                      f"{len(self.cameras)} cameras")
+            self.keypoints = KeypointTargets.from_evidence(evidence, self.rig_points, CROP_MARGIN)
+        elif self.weights.keypoint:
+            raise LikelihoodError("the likelihood has a keypoint term: pass the frame's learned evidence "
+                                  "to set_frame(features, evidence)")
+
+    @property
+    def rig_points(self):
+        if self._rig_points is None:
+            self._rig_points = rig_keypoints(self.body)
+        return self._rig_points
+
+    def project_rig_points(self, poses):
+        """(P,D) -> (P,C,K,2) capture pixels of the landmarks' rig points."""
+        points = self.rig_points.world(self.body, self._check_poses(poses))
+        P, K = points.shape[:2]
+        flat = points.reshape(-1, 3)
+        return np.stack([cam.project(flat).reshape(P, K, 2) for cam in self.capture_cameras], axis=1)
 
     # ---- statistics and terms ------------------------------------------------------------------
     def _statistics(self, poses, need_chamfer, need_color):
@@ -297,7 +345,7 @@ class EnergyModel:
             names.remove("anat")
         poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
         out = {}
-        image_terms = [n for n in names if n != "anat"]
+        image_terms = [n for n in names if n not in NON_IMAGE_TERMS]
         if image_terms:
             if "color" in names and self.color_model is None:
                 raise LikelihoodError("the colour term needs a colour model: call init_color_model(initial_pose) "
@@ -305,6 +353,11 @@ class EnergyModel:
             stats, hist = self._statistics(poses, "silh_ch" in names, "color" in names)
             for n in image_terms:
                 out[n] = getattr(self, f"_term_{n}")(stats, hist)
+        if "keypoint" in names:
+            if self.keypoints is None:
+                raise LikelihoodError("the keypoint term needs the frame's learned evidence: "
+                                      "call set_frame(features, evidence)")
+            out["keypoint"] = keypoint_energy(self.project_rig_points(poses), self.keypoints, self.rig_points.swap)
         if "anat" in names:
             out["anat"] = self.prior.energy(poses)
         return out

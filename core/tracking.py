@@ -23,6 +23,14 @@ from .proxy import make_proxy
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
 
 REANCHOR_ANGLE = np.deg2rad(20.0)
+# First frame from keypoints: the global search then only needs to look this far around the fitted pose.
+KEYPOINT_INIT_TRANSLATION = 0.08  # metres, half width
+KEYPOINT_INIT_YAW = float(np.deg2rad(8.0))
+KEYPOINT_INIT_MAX_RMS = 0.12
+# Recovery: a limb whose landmarks lie this far from it (median over views, in units of the person's size
+# in the view) for this many frames in a row is searched again on its own [DESIGN].
+RECOVERY_DISTANCE = 0.1
+RECOVERY_FRAMES = 3  # metres: a worse fit means the landmarks disagree; keep the rough placement
 # Where the optimisers keep poses between frames (expressed relative to the anchor): these, and
 # only these, are re-expressed when the anchor moves. Scales and floors must not be touched.
 POSE_STATE_ATTRIBUTES = ("x0", "particles", "state", "hist")
@@ -132,6 +140,11 @@ class Tracker:
         self.optimizer = make_optimizer(self.settings.algorithm, self.space, budget=self.settings.budget,
                                         seed=self.settings.seed, **self._optimizer_kwargs())
         self.anchor = np.eye(3)
+        self.landmark_model = None  # loaded on first use (learned-evidence likelihoods)
+        self.evidence = None
+        self.keypoint_fit = None
+        self.limb_off_frames = {}  # limb -> frames in a row its keypoints disagreed
+        self.recoveries = []
         self.history = []  # relative poses of the solved frames (most recent last)
         self.estimates = []
 
@@ -175,11 +188,44 @@ class Tracker:
             models[cam.name] = BackgroundModel.from_frames(frames, method="median" if mode == "auto" else mode)
         return models
 
-    def features(self, frame):
+    def features(self, frame, guide_poses=None):
+        """The frame's ViewFeatures per camera; with learned evidence, also sets self.evidence (one
+        ViewEvidence per camera, the model's crops placed around `guide_poses`: the poses the person is
+        expected near, absolute)."""
         images = self.capture.frames.read(frame)
+        cams = self.capture.cameras
+        masks = [None] * len(cams)
+        self.evidence = None
+        if self.energy.weights.needs_learned_evidence:
+            self.evidence = self.observe(images, guide_poses)
+            if self.energy.weights.mask == "learned":
+                masks = [ev.mask if ev.found else None for ev in self.evidence]
         return [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
-                                      diffuse=self.uses_color)
-                for cam in self.capture.cameras]
+                                      diffuse=self.uses_color, silhouette=mask)
+                for cam, mask in zip(cams, masks)]
+
+    def observe(self, images, guide_poses):
+        """Learned evidence per view, from crops around the projected joints of `guide_poses`."""
+        from .features.learned import LandmarkModel, crop_around, locate
+
+        if self.landmark_model is None:
+            self.landmark_model = LandmarkModel()
+        cams = self.capture.cameras
+        joints = self.body.joint_positions(np.atleast_2d(guide_poses)).reshape(-1, 3)
+        boxes = [crop_around(cam.project(joints)) for cam in cams]
+        frames = [images[cam.name] for cam in cams]
+        return locate(self.landmark_model, frames, boxes,
+                      foreground=lambda i: self.backgrounds[cams[i].name].silhouette(frames[i]))
+
+    def _guide_poses(self):
+        """Where the person is expected this frame: the last estimate and its constant-velocity step."""
+        last = [self.to_absolute(h) for h in self.history[-2:]]
+        if len(last) == 2:
+            return np.stack([last[1], 2 * last[1] - last[0]])
+        return np.stack(last)
+
+    def _set_frame(self, feats):
+        self.energy.set_frame(feats, self.evidence)
 
     @property
     def uses_color(self):
@@ -241,19 +287,25 @@ class Tracker:
         body, s = self.body, self.settings
         rough = body.default_pose() if rough_pose is None else np.asarray(rough_pose, float)
         self.anchor = rotvec_to_matrix(rough[body.root_rotation_dofs])
-        feats = self.features(frame)
+        feats = self.features(frame, rough if initial_pose is None else initial_pose)
         self.energy.set_reference_pose(default_pose_at(body, rough))
-        self.energy.set_frame(feats)
+        self._set_frame(feats)
         if initial_pose is None:
             from .optimizers.isa import InteractingSimulatedAnnealing
 
             searcher = InteractingSimulatedAnnealing(self.space, seed=s.seed, n=min(s.particles, s.init_particles),
                                                      **self._schedule_kwargs())
-            x0 = self.to_relative(self._neutral_joints(rough))
+            start, half_width, yaw_spread = self._neutral_joints(rough), s.init_translation, s.init_yaw / 2
+            fitted = self._keypoint_start(start) if self.evidence is not None else None
+            if fitted is not None:  # the landmarks place the body: search closer around it
+                start, half_width, yaw_spread = fitted, KEYPOINT_INIT_TRANSLATION, KEYPOINT_INIT_YAW
+                feats = self.features(frame, fitted)  # crops around the person, not the rough placement
+                self._set_frame(feats)
+            x0 = self.to_relative(start)
             spread = self.space.scale * 4  # joints: 20 degrees around the neutral posture
             tilt, yaw = body.root_rotation_dofs[:2], body.root_rotation_dofs[2]  # rotation vector in world axes, Z up
             spread[tilt] = np.deg2rad(8.0)
-            spread[yaw] = s.init_yaw / 2
+            spread[yaw] = yaw_spread
             weights = self.energy.weights
             # The colour model is built from the initial pose, so the search for it cannot use colour.
             self.energy.weights = dataclasses.replace(weights, color=0.0)
@@ -261,7 +313,7 @@ class Tracker:
                 result = searcher.global_init(
                     self._energy_fn, x0, spread, n=s.init_particles, iterations=s.init_iterations,
                     joints="around", translation_dofs=body.translation_dofs,
-                    translation_half_width=s.init_translation, yaw_dof=None)
+                    translation_half_width=half_width, yaw_dof=None)
                 estimate, evaluations = result.estimate, result.evaluations
                 if s.init_limbs:
                     polish = (lambda pose: self._icp_fit(feats, pose)) if self.refines else None
@@ -281,6 +333,16 @@ class Tracker:
         self.optimizer.start(self.to_relative(pose))
         return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
 
+    def _keypoint_start(self, start):
+        """The first frame's pose from the triangulated landmarks (core/keypoint_fit.py), or None when too
+        few landmarks triangulate or the fit leaves them far apart."""
+        from .keypoint_fit import pose_from_keypoints
+
+        pose, n_points, rms = pose_from_keypoints(self.body, self.capture.cameras, self.energy.keypoints,
+                                                  self.energy.rig_points, start)
+        self.keypoint_fit = {"points": n_points, "rms_m": rms}
+        return pose if n_points >= 6 and rms < KEYPOINT_INIT_MAX_RMS else None
+
     def _neutral_joints(self, rough):
         """The rough placement with the joints of a typical posture: the per-DOF median of the prior's
         training poses (a person standing or walking), not the rig's rest pose (often an A- or T-pose)."""
@@ -294,8 +356,8 @@ class Tracker:
     def track(self, frame):
         """Solve one frame after the initial one."""
         t0 = time.perf_counter()
-        feats = self.features(frame)
-        self.energy.set_frame(feats)
+        feats = self.features(frame, self._guide_poses())
+        self._set_frame(feats)
         if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
             self.optimizer.set_frame_problem(self._icp_problem(feats))
         result = self.optimizer.track_frame(self._energy_fn, list(self.history))
@@ -303,6 +365,8 @@ class Tracker:
         if self.refines:
             estimate = self._refine(feats, estimate)
             energy, evaluations = float(self._energy_fn(estimate[None])[0]), evaluations + 1
+        if self.evidence is not None:
+            estimate, energy, evaluations = self._recover_limbs(feats, estimate, energy, evaluations, frame)
         pose = self.to_absolute(estimate)
         lam = self.settings.color_adaptation
         lam = self.energy.weights.adaptation if lam is None else lam
@@ -311,6 +375,31 @@ class Tracker:
         est = self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
         self._reanchor(self.history[-1])
         return est
+
+    def _recover_limbs(self, feats, estimate, energy, evaluations, frame):
+        """Search again, each on its own, the limbs whose keypoints have disagreed for RECOVERY_FRAMES frames."""
+        from .keypoints import limb_disagreement
+
+        pose = self.to_absolute(estimate)
+        off = limb_disagreement(self.energy.project_rig_points(pose[None])[0], self.energy.keypoints,
+                                self.energy.rig_points)
+        for limb, distance in off.items():
+            self.limb_off_frames[limb] = self.limb_off_frames.get(limb, 0) + 1 if distance > RECOVERY_DISTANCE else 0
+        lost = {limb: idx for limb, idx in limb_dofs(self.body.dofs).items()
+                if self.limb_off_frames.get(limb, 0) >= RECOVERY_FRAMES}
+        if not lost:
+            return estimate, energy, evaluations
+        polish = (lambda p: self._icp_fit(feats, p)) if self.refines else None
+        found, found_energy, used = search_limbs(self._energy_fn, self.space, estimate, lost,
+                                                 seed=self.settings.seed + 7919 * int(frame), polish=polish)
+        self.recoveries.append({"frame": int(frame), "limbs": sorted(lost), "kept": bool(found_energy < energy)})
+        for limb in lost:
+            self.limb_off_frames[limb] = 0
+        if found_energy < energy:
+            step = found - estimate
+            self._map_pose_state(lambda poses: self.space.clamp(poses + step), PARTICLE_STATE_ATTRIBUTES)
+            return found, float(found_energy), evaluations + used
+        return estimate, energy, evaluations + used
 
     @property
     def refines(self):
@@ -332,9 +421,12 @@ class Tracker:
         from .optimizers.icp import IcpProblem
 
         cameras = [c.scaled(self.scale) for c in self.capture.cameras]
+        keypoints = self.energy.keypoints if self.evidence is not None and self.energy.weights.keypoint else None
         return IcpProblem(body=self.body, proxy=self.proxy, cameras=cameras,
                           silhouettes=[f.silhouette for f in feats], to_absolute=self.to_absolute,
-                          prior=getattr(self.energy, "prior", None))
+                          prior=getattr(self.energy, "prior", None),
+                          keypoints=None if keypoints is None else keypoints.scaled(self.scale),
+                          rig_points=self.energy.rig_points if keypoints is not None else None)
 
     def _record(self, frame, pose, energy, seconds, evaluations):
         self.history.append(self.to_relative(pose))
@@ -349,7 +441,8 @@ class Tracker:
         """Everything needed to continue exactly where this tracker stands (picklable)."""
         return {"optimizer": self.optimizer, "anchor": self.anchor, "history": self.history,
                 "color_model": (self.energy.color_model, self.energy.color_count),
-                "reference": (self.energy.reference_area, self.energy.reference_boundary)}
+                "reference": (self.energy.reference_area, self.energy.reference_boundary),
+                "limb_off_frames": dict(self.limb_off_frames)}
 
     def restore(self, state):
         self.optimizer = state["optimizer"]
@@ -357,6 +450,7 @@ class Tracker:
         self.history = list(state["history"])
         self.energy.reference_area, self.energy.reference_boundary = state["reference"]
         self.energy.color_model, self.energy.color_count = state["color_model"]
+        self.limb_off_frames = dict(state.get("limb_off_frames", {}))
 
 
 def run_tracker(tracker, frames, initial_pose=None, rough_pose=None, on_frame=None, should_stop=None):

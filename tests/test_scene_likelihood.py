@@ -1,6 +1,8 @@
 """The likelihood on the rendered sample scenes: silhouettes against the true masks, and every
 named likelihood prefers the ground-truth pose to random perturbations of it (issue: >= 95% of 500
 perturbations of 5 cm / 10 degrees per DOF)."""
+from functools import lru_cache
+
 import cv2
 import numpy as np
 import pytest
@@ -11,11 +13,17 @@ pytest.importorskip("bpy")
 
 from markerless_mocap.core.capture.capture import load_capture  # noqa: E402
 from markerless_mocap.core.features import BackgroundModel, compute_view_features, silhouette_iou  # noqa: E402
+from markerless_mocap.core.features.learned import LandmarkModel, crop_around, locate  # noqa: E402
 from markerless_mocap.core.likelihood import LIKELIHOODS, EnergyModel, default_pose_at  # noqa: E402
 from markerless_mocap.core.motion_library import build_motion_models, scene_exclusion  # noqa: E402
 from markerless_mocap.core.proxy import make_proxy  # noqa: E402
 
 SCENES = ("walk", "playground")
+
+
+@lru_cache(maxsize=1)
+def landmark_model():
+    return LandmarkModel()
 
 def gt_masks(name):
     """{(camera, frame): bool mask} from gt_masks/<cam>/<frame>.png."""
@@ -78,18 +86,28 @@ def test_ground_truth_beats_random_perturbations(scene_energy, likelihood):
     energy.set_reference_pose(default_pose_at(body, gt[0]))
 
     def features(frame):
+        """The frame's features, and its learned evidence (crops around the previous frame's true pose,
+        as the tracker places them around its last estimate) when the likelihood uses it."""
         images = capture.frames.read(frame)
+        evidence, masks = None, [None] * len(capture.cameras)
+        if energy.weights.needs_learned_evidence:
+            joints = body.joint_positions(gt[max(0, frame - 1)][None])[0]
+            boxes = [crop_around(c.project(joints)) for c in capture.cameras]
+            evidence = locate(landmark_model(), [images[c.name] for c in capture.cameras], boxes)
+            if energy.weights.mask == "learned":
+                masks = [ev.mask for ev in evidence]
         return [compute_view_features(images[c.name], backgrounds[c.name], scale=energy.scale,
-                                      diffuse=energy.weights.color > 0) for c in capture.cameras]
+                                      diffuse=energy.weights.color > 0, silhouette=m)
+                for c, m in zip(capture.cameras, masks)], evidence
 
     if energy.weights.color:
-        energy.set_frame(features(0))
+        energy.set_frame(*features(0))
         energy.init_color_model(gt[0])
     rng = np.random.default_rng(11)
     scale = np.where(np.isin(np.arange(body.n_dof), body.translation_dofs), 0.05, np.deg2rad(10.0))
     wins = []
     for frame in (10, 30, 50):
-        energy.set_frame(features(frame))
+        energy.set_frame(*features(frame))
         perturbed = body.clamp(gt[frame] + rng.normal(0, 1, (500, body.n_dof)) * scale)
         e_true = energy(gt[frame][None])[0]
         wins.append(float((energy(perturbed) > e_true).mean()))

@@ -90,15 +90,21 @@ def feature_size(shape, scale: float) -> tuple[int, int]:
     return max(1, int(round(shape[1] * scale))), max(1, int(round(shape[0] * scale)))
 
 
-def compute_view_features(image_bgr: np.ndarray, background: BackgroundModel, scale: float = 1.0,
-                          diffuse: bool = True, edge_percentile: float = 90) -> ViewFeatures:
+def compute_view_features(image_bgr: np.ndarray, background: BackgroundModel | None, scale: float = 1.0,
+                          diffuse: bool = True, edge_percentile: float = 90,
+                          silhouette: np.ndarray | None = None) -> ViewFeatures:
     """Features of one frame of one camera at `scale` x its resolution (scale 0.5 -> half width/height).
 
-    The silhouette is found at the camera resolution (the background model's) and area-resampled.
+    The silhouette is found at the camera resolution (the background model's, unless a camera-resolution
+    `silhouette` is given, e.g. the learned person mask) and area-resampled.
     """
     img = as_bgr_float(image_bgr, "frame")
     size = feature_size(img.shape, scale)
-    silhouette = resize_mask(background.silhouette(image_bgr), size)
+    if silhouette is None:
+        if background is None:
+            raise FeatureInputError("compute_view_features needs a background model or a silhouette")
+        silhouette = background.silhouette(image_bgr)
+    silhouette = resize_mask(check_mask(silhouette), size)
     small = img if size == img.shape[1::-1] else cv2.resize(img, size, interpolation=cv2.INTER_AREA)
     small01 = np.clip(small / np.float32(255.0), 0.0, 1.0)
     edges = sobel_edges(small01, silhouette, edge_percentile)

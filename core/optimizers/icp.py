@@ -63,6 +63,11 @@ class IcpProblem:
     silhouettes: list
     to_absolute: Callable[[np.ndarray], np.ndarray] = _identity
     prior: object | None = None
+    # Learned landmarks (core/keypoints.KeypointTargets at this problem's resolution) and the rig points
+    # they stand for: residuals beside the rim correspondences, so the local fit keeps what they show
+    # (a hand in front of the torso has no rim).
+    keypoints: object | None = None
+    rig_points: object | None = None
 
     def __post_init__(self):
         if len(self.cameras) == 0:
@@ -257,6 +262,8 @@ class IcpSettings:
     normal_angle: float = 60.0  # degrees
     huber: float = 3.0  # px
     prior_weight: float = 2.0
+    keypoint_weight: float = 0.2  # of the mean Huber keypoint loss (px^2), beside the rim term's
+    keypoint_huber: float = 4.0  # px
     residual: str = "point"  # "point": u - p (eq. 8); "line": its component along the contour normal
     step_tol: float = 1e-4  # stop when every |delta| / scale falls below this
     cost_tol: float = 1e-4  # ... or the relative cost decrease does
@@ -330,15 +337,78 @@ class IcpSolver:
                 r[m] = cam.project(verts[corr.vertex[m]]) - corr.target[m]
         return r
 
+    # ---- keypoints ------------------------------------------------------------------------------
+    def _keypoint_assignment(self, x_abs):
+        """(C,K) landmark index each rig point is compared with (each view's left/right pairs as they fit
+        the pose best) and its weight, or None without keypoints."""
+        kp, rig = self.problem.keypoints, self.problem.rig_points
+        if kp is None or rig is None or self.settings.keypoint_weight == 0:
+            return None
+        pts = rig.world(self.problem.body, x_abs[None])[0]
+        K = len(pts)
+        index = np.empty((len(self.problem.cameras), K), dtype=np.int64)
+        for c, cam in enumerate(self.problem.cameras):
+            uv = cam.project(pts)
+            same = np.linalg.norm(uv - kp.uv[c], axis=1)
+            cross = np.linalg.norm(uv - kp.uv[c][rig.swap], axis=1)
+            flip = (cross + cross[rig.swap]) < (same + same[rig.swap])
+            index[c] = np.where(flip, rig.swap, np.arange(K))
+        weight = np.take_along_axis(kp.weight, index, axis=1)
+        return index, weight
+
+    def _keypoint_residuals(self, x_abs, assignment):
+        """(C,K,2) projected rig point minus its landmark."""
+        index, _ = assignment
+        kp, rig = self.problem.keypoints, self.problem.rig_points
+        pts = rig.world(self.problem.body, x_abs[None])[0]
+        return np.stack([cam.project(pts) - np.take_along_axis(kp.uv[c], index[c][:, None], axis=0)
+                         for c, cam in enumerate(self.problem.cameras)])
+
+    def _keypoint_cost(self, x_abs, assignment):
+        if assignment is None:
+            return 0.0
+        _, weight = assignment
+        if weight.sum() <= 0:
+            return 0.0
+        e = np.linalg.norm(self._keypoint_residuals(x_abs, assignment), axis=-1)
+        s = self.settings
+        return s.keypoint_weight * float((weight * huber_loss(e, s.keypoint_huber)).sum() / weight.sum())
+
+    def _keypoint_normal_equations(self, x_abs, assignment):
+        """(H, g, cost) of the weighted mean Huber keypoint loss, Gauss-Newton with IRLS weights."""
+        D = self.problem.body.n_dof
+        if assignment is None or assignment[1].sum() <= 0:
+            return np.zeros((D, D)), np.zeros(D), 0.0
+        s, rig, body = self.settings, self.problem.rig_points, self.problem.body
+        _, weight = assignment
+        r = self._keypoint_residuals(x_abs, assignment)  # (C,K,2)
+        e = np.linalg.norm(r, axis=-1)
+        irls = weight * np.where(e <= s.keypoint_huber, 1.0, s.keypoint_huber / np.maximum(e, 1e-12))
+        onehot = np.zeros((len(rig.bones), body.skeleton.n_bones))
+        onehot[np.arange(len(rig.bones)), rig.bones] = 1.0
+        J3 = vertex_jacobian(body, x_abs, rig.rest_points[:, :3], onehot, self.descendants)  # (K,3,D)
+        pts = rig.world(body, x_abs[None])[0]
+        H, g = np.zeros((D, D)), np.zeros(D)
+        for c, cam in enumerate(self.problem.cameras):
+            J = projection_jacobian(cam, pts) @ J3  # (K,2,D)
+            w = np.repeat(irls[c], 2)
+            Jf, rf = J.reshape(-1, D), r[c].reshape(-1)
+            H += (Jf * w[:, None]).T @ Jf
+            g += Jf.T @ (w * rf)
+        norm = s.keypoint_weight / weight.sum()
+        cost = s.keypoint_weight * float((weight * huber_loss(e, s.keypoint_huber)).sum() / weight.sum())
+        return H * norm, g * norm, cost
+
     def _errors(self, r, corr):
         """Per-correspondence error (px) of the chosen residual."""
         if self.settings.residual == "line":
             return np.abs(np.einsum("ni,ni->n", r, corr.normal))
         return np.linalg.norm(r, axis=1)
 
-    def _cost(self, x_abs, corr):
+    def _cost(self, x_abs, corr, assignment=None):
         e = self._errors(self._residuals(x_abs, corr), corr)
-        return float(huber_loss(e, self.settings.huber).mean()) + self._prior(x_abs)
+        return (float(huber_loss(e, self.settings.huber).mean()) + self._prior(x_abs)
+                + self._keypoint_cost(x_abs, assignment))
 
     def residual_jacobian(self, x_abs, corr: Correspondences, verts=None) -> np.ndarray:
         """(N,2,D) derivative of every correspondence residual (pixel of the rim vertex)."""
@@ -392,6 +462,9 @@ class IcpSolver:
             e = self._errors(r, corr)
             history["mean_residual_px"].append(float(np.linalg.norm(r, axis=1).mean()))
             H, g, cost0 = self._normal_equations(x_abs, corr, r, e, verts)
+            assignment = self._keypoint_assignment(x_abs)
+            H_kp, g_kp, cost_kp = self._keypoint_normal_equations(x_abs, assignment)
+            H, g, cost0 = H + H_kp, g + g_kp, cost0 + cost_kp
             history["cost"].append(cost0)
             diag = np.diag(H).copy()
             diag = np.maximum(diag, 1e-9 * max(float(diag.mean()), 1e-300))  # unobserved DOF stay put
@@ -399,7 +472,7 @@ class IcpSolver:
             for _ in range(LM_TRIES):
                 delta = np.linalg.solve(H + mu * np.diag(diag), -g)
                 x_try = space.clamp(apply_increment(x, delta, rd))
-                cost1 = self._cost(self._absolute(x_try), corr)
+                cost1 = self._cost(self._absolute(x_try), corr, assignment)
                 if np.isfinite(cost1) and cost1 < cost0:
                     accepted = True
                     mu = max(mu / 10.0, 1e-7)

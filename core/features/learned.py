@@ -1,0 +1,232 @@
+"""Learned image evidence: a person mask and 33 body landmarks per view, from BlazePose in OpenCV's DNN.
+
+The model (core/data/models/pose_landmark_full.tflite, Apache-2.0) looks at one square 256 x 256 crop.
+A model-based tracker knows where the person is, so the crop comes from the projection of the
+predicted pose (first frame: the rough placement) grown by a margin; no person detector is needed.
+When a view's crop loses the person (low presence), the crop is widened, then placed on the largest
+person-like blob of the view's own foreground, before the view is given up for that frame: evidence
+from the wrong place is worse than none.
+
+Everything returned is in image pixels of the camera's full-resolution frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .errors import FeatureInputError
+
+MODEL_PATH = Path(__file__).resolve().parents[1] / "data" / "models" / "pose_landmark_full.tflite"
+INPUT_SIZE = 256
+N_LANDMARKS = 33
+CROP_MARGIN = 1.35       # the crop's side over the larger side of the projected joints' box [measured, doc]
+MIN_PRESENCE = 0.5       # below this the crop is taken to have lost the person
+MASK_THRESHOLD = 0.5     # segmentation probability that counts as person
+
+# BlazePose's left/right pairs (odd = the person's left): swapping them mirrors a skeleton.
+LEFT_RIGHT_PAIRS = ((1, 4), (2, 5), (3, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16), (17, 18),
+                    (19, 20), (21, 22), (23, 24), (25, 26), (27, 28), (29, 30), (31, 32))
+SWAP_ORDER = np.arange(N_LANDMARKS)
+for _a, _b in LEFT_RIGHT_PAIRS:
+    SWAP_ORDER[_a], SWAP_ORDER[_b] = _b, _a
+
+
+class LearnedModelError(FeatureInputError):
+    """The landmark model file is missing or cannot be loaded."""
+
+
+def _sigmoid(x):
+    return 1.0 / (1.0 + np.exp(-np.clip(x, -60, 60)))
+
+
+# ---------------------------------------------------------------------------------------- crop geometry
+@dataclass(frozen=True)
+class CropBox:
+    """A square window of the image: centre (cx, cy) and side `size` in image pixels, mapped onto the
+    model's INPUT_SIZE x INPUT_SIZE input. It may extend past the image (the outside is black)."""
+    cx: float
+    cy: float
+    size: float
+
+    @property
+    def factor(self):
+        return INPUT_SIZE / self.size
+
+    def to_crop(self, uv):
+        uv = np.asarray(uv, dtype=np.float64)
+        return (uv - [self.cx - self.size / 2, self.cy - self.size / 2]) * self.factor
+
+    def to_image(self, uv):
+        uv = np.asarray(uv, dtype=np.float64)
+        return uv / self.factor + [self.cx - self.size / 2, self.cy - self.size / 2]
+
+    def image_to_crop_matrix(self):
+        """2x3 affine: image pixel centres -> crop pixel centres (for cv2.warpAffine)."""
+        f = self.factor
+        x0, y0 = self.cx - self.size / 2, self.cy - self.size / 2
+        # pixel centres: crop (u + 0.5) = f (x + 0.5 - x0)
+        return np.array([[f, 0.0, f * (0.5 - x0) - 0.5], [0.0, f, f * (0.5 - y0) - 0.5]])
+
+    def widened(self, factor):
+        return CropBox(self.cx, self.cy, self.size * factor)
+
+    def contains(self, uv):
+        uv = np.asarray(uv, dtype=np.float64)
+        half = self.size / 2
+        return (np.abs(uv[..., 0] - self.cx) <= half) & (np.abs(uv[..., 1] - self.cy) <= half)
+
+
+def crop_around(points_uv, margin=CROP_MARGIN, min_size=32.0):
+    """The square crop around image points (the projected joints of a pose), `margin` x their box."""
+    pts = np.asarray(points_uv, dtype=np.float64).reshape(-1, 2)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) == 0:
+        raise FeatureInputError("no finite point to place the crop around")
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    centre = (lo + hi) / 2
+    return CropBox(float(centre[0]), float(centre[1]), float(max(min_size, margin * (hi - lo).max())))
+
+
+def whole_image_crop(width, height):
+    return CropBox(width / 2.0, height / 2.0, float(max(width, height)))
+
+
+def crop_image(image_bgr, box):
+    """The model's input for one view: RGB float32 in [0, 1], INPUT_SIZE square, black outside the image."""
+    img = np.asarray(image_bgr)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise FeatureInputError(f"expected a colour image HxWx3, got shape {img.shape}")
+    crop = cv2.warpAffine(img, box.image_to_crop_matrix(), (INPUT_SIZE, INPUT_SIZE), flags=cv2.INTER_AREA
+                          if box.factor < 1 else cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    crop = cv2.cvtColor(crop, cv2.COLOR_BGR2RGB).astype(np.float32)
+    return crop / (np.float32(255.0) if img.dtype == np.uint8 or crop.max() > 1.5 else np.float32(1.0))
+
+
+def mask_to_image(prob_crop, box, width, height):
+    """A crop's mask probabilities -> the full image; NaN (unknown) outside the crop."""
+    inverse = cv2.invertAffineTransform(box.image_to_crop_matrix())
+    prob = cv2.warpAffine(np.asarray(prob_crop, np.float32), inverse, (width, height), flags=cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+    ys, xs = np.mgrid[0:height, 0:width]
+    outside = ~box.contains(np.stack([xs + 0.5, ys + 0.5], axis=-1))
+    prob[outside] = np.nan
+    return prob
+
+
+# ---------------------------------------------------------------------------------------- the model
+@dataclass
+class ViewEvidence:
+    """One view's learned evidence, in the camera's full-resolution pixels."""
+    mask_prob: np.ndarray   # float32 HxW person probability; NaN where the crop did not look (unknown)
+    keypoints: np.ndarray   # (33, 2) landmark positions
+    visibility: np.ndarray  # (33,) in [0, 1]: the landmark is in view and not occluded
+    presence: float         # the model's confidence that a person is in the crop
+    box: CropBox | None     # where it looked; None: no evidence in this view this frame
+
+    @property
+    def found(self):
+        return self.box is not None and self.presence >= MIN_PRESENCE
+
+    @property
+    def mask(self):
+        """bool HxW: person where the model says so; unknown counts as not person."""
+        with np.errstate(invalid="ignore"):
+            return np.nan_to_num(self.mask_prob, nan=0.0) >= MASK_THRESHOLD
+
+    @property
+    def known(self):
+        return np.isfinite(self.mask_prob)
+
+    @classmethod
+    def empty(cls, width, height):
+        return cls(np.full((height, width), np.nan, np.float32), np.full((N_LANDMARKS, 2), np.nan),
+                   np.zeros(N_LANDMARKS), 0.0, None)
+
+
+class LandmarkModel:
+    """BlazePose 'full' landmarks + segmentation in OpenCV's DNN, batched over crops."""
+
+    def __init__(self, path=MODEL_PATH):
+        path = Path(path)
+        if not path.is_file():
+            raise LearnedModelError(f"the landmark model {path} is missing: it ships with the extension "
+                                    "(core/data/models/); reinstall the extension or restore that file")
+        try:
+            self.net = cv2.dnn.readNetFromTFLite(str(path))
+        except cv2.error as exc:
+            raise LearnedModelError(f"OpenCV could not load the landmark model {path}: {exc.err}; it needs "
+                                    "OpenCV 4.9 or later with the TFLite importer") from exc
+        self.net.setPreferableBackend(cv2.dnn.DNN_BACKEND_OPENCV)
+        self.outputs = ["Identity", "Identity_1", "Identity_2"]
+
+    def infer(self, crops):
+        """crops (N, 256, 256, 3) RGB in [0, 1] -> landmarks (N, 39, 5) raw, presence (N,), mask logits
+        (N, 256, 256)."""
+        crops = np.asarray(crops, dtype=np.float32)
+        if crops.ndim != 4 or crops.shape[1:] != (INPUT_SIZE, INPUT_SIZE, 3):
+            raise FeatureInputError(f"crops must be (N, {INPUT_SIZE}, {INPUT_SIZE}, 3); got {crops.shape}")
+        self.net.setInput(np.ascontiguousarray(crops.transpose(0, 3, 1, 2)))  # OpenCV wants NCHW
+        landmarks, presence, mask = self.net.forward(self.outputs)
+        n = len(crops)
+        return (landmarks.reshape(n, -1, 5), presence.reshape(n).astype(np.float64),  # already a probability
+                mask.reshape(n, INPUT_SIZE, INPUT_SIZE))
+
+    def evidence(self, images, boxes):
+        """One ViewEvidence per (image, box), one batched forward pass."""
+        crops = np.stack([crop_image(img, box) for img, box in zip(images, boxes)])
+        landmarks, presence, mask_logits = self.infer(crops)
+        out = []
+        for img, box, lm, pres, logit in zip(images, boxes, landmarks, presence, mask_logits):
+            h, w = img.shape[:2]
+            kp = box.to_image(lm[:N_LANDMARKS, :2])
+            vis = _sigmoid(lm[:N_LANDMARKS, 3]) * _sigmoid(lm[:N_LANDMARKS, 4])
+            out.append(ViewEvidence(mask_to_image(_sigmoid(logit), box, w, h), kp, vis, float(pres), box))
+        return out
+
+
+# ---------------------------------------------------------------------------------------- finding the person again
+def person_blob_crop(foreground, min_area_fraction=0.002):
+    """A crop on the tallest upright blob of a foreground mask (the person when the prediction lost it)."""
+    fg = np.asarray(foreground, dtype=np.uint8)
+    fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((7, 7), np.uint8))
+    n, _, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
+    best, best_score = None, 0.0
+    for i in range(1, n):
+        x, y, w, h, area = stats[i]
+        if area < min_area_fraction * fg.size or h < 1.2 * w:  # people stand taller than wide
+            continue
+        if h * area > best_score:
+            best, best_score = (x, y, w, h), h * area
+    if best is None:
+        return None
+    x, y, w, h = best
+    return crop_around([[x, y], [x + w, y + h]])
+
+
+def locate(model, images, boxes, foreground=None, widen=1.6):
+    """Evidence per view: the given crop; where the person is lost there, a wider crop; then a crop on
+    the view's largest person-like foreground blob (`foreground(i)` -> bool mask of view i, asked only
+    for such views); else the view has no evidence this frame."""
+    evidence = model.evidence(images, boxes)
+    retry = [i for i, ev in enumerate(evidence) if not ev.found]
+    if retry:
+        wider = model.evidence([images[i] for i in retry], [boxes[i].widened(widen) for i in retry])
+        for i, ev in zip(retry, wider):
+            if ev.found:
+                evidence[i] = ev
+    retry = [i for i, ev in enumerate(evidence) if not ev.found]
+    blobs = {i: person_blob_crop(foreground(i)) for i in retry} if foreground is not None else {}
+    blobs = {i: b for i, b in blobs.items() if b is not None}
+    if blobs:
+        found = model.evidence([images[i] for i in blobs], list(blobs.values()))
+        for i, ev in zip(blobs, found):
+            if ev.found:
+                evidence[i] = ev
+    for i, ev in enumerate(evidence):
+        if not ev.found:
+            h, w = images[i].shape[:2]
+            evidence[i] = ViewEvidence.empty(w, h)
+    return evidence

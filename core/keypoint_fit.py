@@ -1,0 +1,124 @@
+"""The first frame from keypoints: triangulate the confident landmarks, fit the rig's root and limbs to them.
+
+Single-view landmarks swap left and right now and then; each view's pairs are kept or swapped by
+whichever assignment agrees with the other views (reprojection of the joint triangulation), before
+the final triangulation. The fit then moves the rig's landmark points onto the 3D landmarks
+(least squares over every DOF, within the joint limits, with a weak pull to the starting posture for
+the angles the landmarks do not see). The global search then starts from this pose.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .rotations import matrix_to_rotvec, rotvec_to_matrix
+
+MIN_WEIGHT = 0.5        # a landmark takes part in triangulation above this visibility
+TORSO_LANDMARKS = (11, 12, 23, 24)
+
+
+def triangulate(cameras, uv, weight, min_weight=MIN_WEIGHT):
+    """DLT per point over the views where its weight passes: uv (C,K,2), weight (C,K) -> (K,3), ok (K,)."""
+    C, K = weight.shape
+    X = np.full((K, 3), np.nan)
+    ok = np.zeros(K, bool)
+    Ps = [cam.projection_matrix for cam in cameras]
+    ideal = [cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)]
+    for k in range(K):
+        views = [c for c in range(C) if weight[c, k] >= min_weight]
+        if len(views) < 2:
+            continue
+        rows = []
+        for c in views:
+            u, v = ideal[c][k]
+            w = weight[c, k]
+            rows += [w * (u * Ps[c][2] - Ps[c][0]), w * (v * Ps[c][2] - Ps[c][1])]
+        _, _, vt = np.linalg.svd(np.array(rows))
+        h = vt[-1]
+        if abs(h[3]) > 1e-12:
+            X[k], ok[k] = h[:3] / h[3], True
+    return X, ok
+
+
+def _reprojection_error(cameras, views, X, uv):
+    return sum(float(np.linalg.norm(cameras[c].project(X[None])[0] - uv[c])) for c in views)
+
+
+def resolve_swaps(cameras, uv, weight, swap, max_views=10):
+    """Per left/right pair, the views whose sides are swapped: of every choice of a minority of views to
+    swap, the one whose triangulation reprojects best. Returns uv, weight with those views' pairs swapped."""
+    uv, weight = uv.copy(), weight.copy()
+    C = weight.shape[0]
+    for a, b in [(a, int(b)) for a, b in enumerate(swap) if a < b]:
+        views = [c for c in range(C) if min(weight[c, a], weight[c, b]) >= MIN_WEIGHT]
+        if len(views) < 3 or len(views) > max_views:  # two views cannot outvote each other
+            continue
+        best, best_flip = np.inf, ()
+        for mask in range(1 << len(views)):
+            flip = [views[i] for i in range(len(views)) if mask >> i & 1]
+            if 2 * len(flip) >= len(views):
+                continue
+            trial_uv, trial_w = uv.copy(), weight.copy()
+            for c in flip:
+                trial_uv[c, [a, b]] = trial_uv[c, [b, a]]
+                trial_w[c, [a, b]] = trial_w[c, [b, a]]
+            X, ok = triangulate(cameras, trial_uv[:, [a, b]], trial_w[:, [a, b]])
+            if not ok.all():
+                continue
+            err = (_reprojection_error(cameras, views, X[0], trial_uv[:, a])
+                   + _reprojection_error(cameras, views, X[1], trial_uv[:, b]))
+            if err < best:
+                best, best_flip = err, flip
+        for c in best_flip:
+            uv[c, [a, b]] = uv[c, [b, a]]
+            weight[c, [a, b]] = weight[c, [b, a]]
+    return uv, weight
+
+
+def align_root(body, rig_points, x, targets, ok):
+    """Rotate and move the root of `x` so the rig's torso landmarks meet the triangulated ones (Kabsch)."""
+    torso = np.array([i for i, lm in enumerate(rig_points.landmarks) if lm in TORSO_LANDMARKS and ok[i]])
+    if len(torso) < 3:
+        return x
+    src = rig_points.world(body, x[None])[0][torso]
+    dst = targets[torso]
+    cs, cd = src.mean(axis=0), dst.mean(axis=0)
+    U, _, Vt = np.linalg.svd((dst - cd).T @ (src - cs))
+    R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    out = np.array(x, dtype=np.float64)
+    rd, td = body.root_rotation_dofs, body.translation_dofs
+    out[rd] = matrix_to_rotvec(R @ rotvec_to_matrix(out[rd]))
+    root = out[td]
+    out[td] = R @ (root - cs) + cd
+    return out
+
+
+def fit_to_points(body, rig_points, x0, targets, ok, hold=0.02):
+    """Least squares of the rig's landmark points onto `targets` (K,3) where ok, within the limits."""
+    idx = np.nonzero(ok)[0]
+    joint_dofs = np.setdiff1d(np.arange(body.n_dof), np.concatenate([body.translation_dofs,
+                                                                      body.root_rotation_dofs]))
+
+    def residuals(x):
+        pts = rig_points.world(body, x[None])[0][idx]
+        return np.concatenate([(pts - targets[idx]).ravel(), hold * (x[joint_dofs] - x0[joint_dofs])])
+
+    lo, hi = body.lower.copy(), body.upper.copy()
+    x_start = np.clip(x0, lo + 1e-9, hi - 1e-9)
+    result = least_squares(residuals, x_start, bounds=(lo, hi), loss="soft_l1", f_scale=0.05, max_nfev=60,
+                           x_scale="jac")
+    rms = float(np.sqrt(np.mean(np.square(result.fun[:3 * len(idx)])))) if len(idx) else np.inf
+    return result.x, rms
+
+
+def pose_from_keypoints(body, cameras, targets, rig_points, x_start):
+    """A pose for the frame's KeypointTargets: swaps resolved, triangulated, root aligned, then fitted.
+    Returns (pose, number of triangulated points, rms residual in metres); the pose is `x_start`
+    unchanged when too few landmarks triangulate."""
+    uv, weight = resolve_swaps(cameras, targets.uv, targets.weight, rig_points.swap)
+    X, ok = triangulate(cameras, uv, weight)
+    if ok.sum() < 6:
+        return np.array(x_start, float), int(ok.sum()), np.inf
+    x = align_root(body, rig_points, np.array(x_start, float), X, ok)
+    x, rms = fit_to_points(body, rig_points, x, X, ok)
+    return x, int(ok.sum()), rms

@@ -1,0 +1,184 @@
+"""Body landmarks of the learned model on the tracker's rig: which rig point each landmark stands for,
+and the keypoint energy term that compares them in every view.
+
+LANDMARK_POINTS is the one place that maps BlazePose landmarks onto the rig, by joint role (so every
+rig preset works):
+  ("role", "head")   the head of the role's first bone (the joint the segment starts at)
+  ("role", "end")    the head of the first child of the role's last bone (the joint it ends at)
+  ("role", "front")  the most forward mesh vertex of the role's body part above the role's end
+                     (the nose on the head), carried by the bone that weighs most on that vertex
+BlazePose's hips sit a little higher and wider than the anatomical hip joints; measured on the walk
+and playground scenes (crop from the true pose, frames 0/15) the 2D distance is 2-19 px at 640x480,
+within the model's scatter, so no offset is applied.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .features.learned import SWAP_ORDER
+
+LANDMARK_POINTS = {
+    0: ("neck", "front"),                            # nose
+    11: ("l_shoulder", "head"), 12: ("r_shoulder", "head"),
+    13: ("l_elbow", "head"), 14: ("r_elbow", "head"),
+    15: ("l_elbow", "end"), 16: ("r_elbow", "end"),  # wrists
+    23: ("l_hip", "head"), 24: ("r_hip", "head"),
+    25: ("l_knee", "head"), 26: ("r_knee", "head"),
+    27: ("l_ankle", "head"), 28: ("r_ankle", "head"),
+    31: ("l_ankle", "end"), 32: ("r_ankle", "end"),  # foot index ~ the toes' base
+}
+# Robust loss rho(r) = r^2 / (r^2 + sigma^2) on the distance r in units of the person's size in the view
+# (the crop side / margin): a landmark off by more than a few sigma costs ~1 whatever its distance, so
+# one wrong landmark cannot drag a limb.
+KEYPOINT_SIGMA = 0.05
+
+
+class KeypointMapError(ValueError):
+    """The rig lacks a bone a landmark needs."""
+
+
+@dataclass
+class RigKeypoints:
+    """Rest-space points on the rig that the landmarks stand for, each carried by one bone."""
+    landmarks: np.ndarray   # (K,) BlazePose landmark index per point
+    bones: np.ndarray       # (K,) bone carrying the point
+    rest_points: np.ndarray  # (K,4) homogeneous rest armature-space positions
+    swap: np.ndarray        # (K,) index of the mirrored point (itself for the nose)
+
+    def world(self, body, poses, root_anchor=None):
+        """(P,D) -> (P,K,3) world positions of the points."""
+        M = body.skinning_matrices(np.atleast_2d(poses), root_anchor)[:, self.bones]  # (P,K,4,4)
+        return np.einsum("pkij,kj->pki", M, self.rest_points)[..., :3]
+
+
+def _front_vertex(body, role):
+    sk = body.skeleton
+    part = body.part_names.index(role)
+    vertex_part = body.bone_part[np.argmax(body.weights, axis=1)]
+    end = sk.rest[_end_bone(body, role), :3, 3]
+    frame_forward, frame_up = _rest_axes(body)
+    candidates = np.nonzero((vertex_part == part) & ((body.vertices - end) @ frame_up > 0))[0]
+    if len(candidates) == 0:
+        raise KeypointMapError(f"no mesh vertex of the {role!r} part above its end joint: cannot place the nose")
+    v = candidates[np.argmax(body.vertices[candidates] @ frame_forward)]
+    return int(np.argmax(body.weights[v])), body.vertices[v]
+
+
+def _rest_axes(body):
+    from .body import body_frame
+
+    frame = body_frame(body.skeleton, body.roles)
+    return frame.forward, frame.up
+
+
+def _end_bone(body, role):
+    sk = body.skeleton
+    last = sk.index[body.roles[role][-1]]
+    children = sk.children_of(last)
+    if not children:
+        raise KeypointMapError(f"the bone {body.roles[role][-1]!r} ({role}) has no child bone, so the joint it "
+                               "ends at is unknown; add a child bone (hand or toe)")
+    # The child that continues the bone (the one whose head lies farthest along it: the hand, not a thumb).
+    heads = sk.rest[children, :3, 3] - sk.rest[last, :3, 3]
+    axis = sk.rest[last, :3, 1]
+    return children[int(np.argmax(heads @ axis))]
+
+
+def rig_keypoints(body):
+    """The rig points of LANDMARK_POINTS for `body` (any preset)."""
+    sk = body.skeleton
+    landmarks, bones, points = [], [], []
+    for lm, (role, where) in LANDMARK_POINTS.items():
+        if role not in body.roles:
+            raise KeypointMapError(f"the rig has no {role!r} joint for landmark {lm}")
+        if where == "head":
+            b = sk.index[body.roles[role][0]]
+            p = sk.rest[b, :3, 3]
+        elif where == "end":
+            b = sk.index[body.roles[role][-1]]
+            p = sk.rest[_end_bone(body, role), :3, 3]
+        else:
+            b, p = _front_vertex(body, role)
+        landmarks.append(lm)
+        bones.append(b)
+        points.append(np.append(p, 1.0))
+    landmarks = np.array(landmarks)
+    where = {lm: i for i, lm in enumerate(landmarks)}
+    swap = np.array([where.get(int(SWAP_ORDER[lm]), i) for i, lm in enumerate(landmarks)])
+    return RigKeypoints(landmarks, np.array(bones), np.array(points), swap)
+
+
+@dataclass
+class KeypointTargets:
+    """One frame's landmarks for the rig points: (C,K,2) capture pixels, (C,K) weights, (C,) person size."""
+    uv: np.ndarray
+    weight: np.ndarray
+    person_px: np.ndarray
+
+    def scaled(self, factor):
+        """The same landmarks for cameras scaled by `factor` (Camera.scaled)."""
+        return KeypointTargets((self.uv + 0.5) * factor - 0.5, self.weight, self.person_px * factor)
+
+    @classmethod
+    def from_evidence(cls, evidence, rig_points, margin):
+        uv = np.stack([ev.keypoints[rig_points.landmarks] for ev in evidence])
+        weight = np.stack([ev.visibility[rig_points.landmarks] if ev.found else np.zeros(len(rig_points.landmarks))
+                           for ev in evidence])
+        size = np.array([ev.box.size / margin if ev.box is not None else 1.0 for ev in evidence])
+        uv = np.where(np.isfinite(uv), uv, 0.0)
+        return cls(uv, weight, size)
+
+
+def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA):
+    """Projected rig points (P,C,K,2) vs landmarks -> (P,) energy in [0, 1].
+
+    Per view: the visibility-weighted mean of rho over the points; each left/right pair counts with
+    whichever assignment fits the pose better (single-view detectors swap sides; the other views and
+    the other cues decide). Views without landmarks are left out; the mean is over the views that have some.
+    """
+    d_same = np.linalg.norm(projected - targets.uv[None], axis=-1)            # (P,C,K)
+    d_swap = np.linalg.norm(projected - targets.uv[None][:, :, swap], axis=-1)
+    w = targets.weight
+    w_swap = w[:, swap]
+    r2 = (1.0 / (sigma * targets.person_px[None, :, None])) ** 2
+    rho_same = w[None] * (d_same ** 2 * r2) / (d_same ** 2 * r2 + 1)
+    rho_swap = w_swap[None] * (d_swap ** 2 * r2) / (d_swap ** 2 * r2 + 1)
+    pair_same = rho_same + rho_same[:, :, swap]  # a pair's cost under each assignment
+    pair_swap = rho_swap + rho_swap[:, :, swap]
+    per_point = np.where(pair_swap < pair_same, rho_swap, rho_same)
+    total_w = w.sum(axis=1)  # swapping permutes the weights within pairs: same total
+    seen = total_w > 1e-6
+    if not seen.any():
+        return np.zeros(projected.shape[0])
+    per_view = per_point.sum(axis=2)[:, seen] / total_w[seen][None]
+    return per_view.mean(axis=1)
+
+
+# Landmarks that tell where each limb is (the limb names of core/limb_search.LIMB_ROLES).
+LIMB_LANDMARKS = {"left arm": (13, 15), "right arm": (14, 16), "left leg": (25, 27), "right leg": (26, 28)}
+
+
+def limb_disagreement(projected, targets, rig_points, min_weight=0.5):
+    """How far each limb of one pose lies from its landmarks: projected (C,K,2) -> {limb: median distance
+    in units of the person's size over the views and points that see it (NaN where none does)}.
+
+    Each view's left/right assignment is the one that fits the pose better, as in the energy."""
+    d_same = np.linalg.norm(projected - targets.uv, axis=-1) / targets.person_px[:, None]    # (C,K)
+    d_swap = np.linalg.norm(projected - targets.uv[:, rig_points.swap], axis=-1) / targets.person_px[:, None]
+    w = targets.weight
+    w_swap = w[:, rig_points.swap]
+    index = {int(lm): i for i, lm in enumerate(rig_points.landmarks)}
+    out = {}
+    for limb, landmarks in LIMB_LANDMARKS.items():
+        idx = [index[lm] for lm in landmarks if lm in index]
+        both = idx + [int(rig_points.swap[i]) for i in idx]
+        values = []
+        for c in range(len(w)):
+            same = d_same[c, both].sum()
+            swapped = d_swap[c, both].sum()
+            d, wc = (d_swap[c, idx], w_swap[c, idx]) if swapped < same else (d_same[c, idx], w[c, idx])
+            values += list(d[wc >= min_weight])
+        out[limb] = float(np.median(values)) if values else float("nan")
+    return out

@@ -1,0 +1,249 @@
+"""Learned evidence: crop geometry, the BlazePose wrapper on a rendered frame, the keypoint term and the
+first frame from keypoints."""
+import cv2
+import numpy as np
+import pytest
+
+from scene_helpers import ground_truth_poses, scene_dir
+
+from markerless_mocap.core.features.learned import (INPUT_SIZE, CropBox, LandmarkModel, LearnedModelError,
+                                                     ViewEvidence, crop_around, crop_image, locate,
+                                                     mask_to_image)
+
+LIMB_LANDMARKS = {11: "LeftArm", 12: "RightArm", 13: "LeftForeArm", 14: "RightForeArm", 15: "LeftHand",
+                  16: "RightHand", 23: "LeftUpLeg", 24: "RightUpLeg", 25: "LeftLeg", 26: "RightLeg",
+                  27: "LeftFoot", 28: "RightFoot"}
+
+
+# ------------------------------------------------------------------------------------------ crop geometry
+def test_crop_round_trip_and_pixel_mapping():
+    box = CropBox(cx=301.3, cy=188.9, size=173.0)
+    pts = np.array([[250.0, 120.0], [301.3, 188.9], [380.5, 270.25]])
+    assert np.allclose(box.to_image(box.to_crop(pts)), pts, atol=1e-9)
+    assert np.allclose(box.to_crop([[box.cx, box.cy]]), [[INPUT_SIZE / 2, INPUT_SIZE / 2]])
+    # A bright square centred on an image point lands centred on that point's crop coordinates.
+    img = np.zeros((480, 640, 3), np.uint8)
+    cv2.rectangle(img, (276, 146), (284, 154), (255, 255, 255), -1)  # centre (280.5, 150.5) in pixel-centre terms
+    crop = crop_image(img, box)[..., 0]
+    ys, xs = np.nonzero(crop > 0.5)
+    centre = np.array([xs.mean() + 0.5, ys.mean() + 0.5])  # crop pixel centres, edge convention
+    assert np.allclose(centre, box.to_crop([[280.5, 150.5]])[0], atol=0.75)
+
+
+def test_mask_outside_the_crop_is_unknown():
+    box = CropBox(cx=100.0, cy=80.0, size=64.0)
+    prob = mask_to_image(np.ones((INPUT_SIZE, INPUT_SIZE), np.float32), box, 320, 240)
+    known = np.isfinite(prob)
+    assert known[80, 100] and prob[80, 100] == pytest.approx(1.0)
+    assert not known[80, 200] and not known[10, 10]
+    assert abs(int(known.sum()) - 64 * 64) <= 2 * 64 + 4  # the square, up to its border pixels
+
+
+def test_crop_around_is_a_square_with_margin():
+    box = crop_around([[100, 50], [140, 250]], margin=1.5)
+    assert (box.cx, box.cy) == (120.0, 150.0)
+    assert box.size == pytest.approx(300.0)
+
+
+def test_missing_model_file_names_the_fix(tmp_path):
+    with pytest.raises(LearnedModelError, match="reinstall the extension"):
+        LandmarkModel(tmp_path / "nope.tflite")
+
+
+# ------------------------------------------------------------------------------------------ the model on a frame
+@pytest.fixture(scope="module")
+def walk_frame():
+    pytest.importorskip("bpy")
+    from markerless_mocap.core.capture.capture import load_capture
+    from markerless_mocap.core.results import load_joints
+
+    capture = load_capture(scene_dir("walk"))
+    names, _, positions = load_joints(scene_dir("walk") / "gt_joints.npz")
+    return capture, list(names), positions
+
+
+def test_model_finds_the_person_on_a_rendered_frame(walk_frame):
+    """Crops from the true pose, walk frame 0: 12 limb landmarks within 12 px median of the projected true
+    joints (measured 3.5-7.8 px per view), person masks IoU >= 0.85 with the true masks (measured 0.89-0.95)."""
+    capture, names, positions = walk_frame
+    images = capture.frames.read(0)
+    cams = capture.cameras
+    boxes = [crop_around(cam.project(positions[0])) for cam in cams]
+    evidence = locate(LandmarkModel(), [images[c.name] for c in cams], boxes)
+    for cam, ev in zip(cams, evidence):
+        assert ev.found and ev.presence > 0.9
+        uv = cam.project(positions[0])
+        errors = [np.linalg.norm(ev.keypoints[k] - uv[names.index(b)]) for k, b in LIMB_LANDMARKS.items()]
+        truth = cv2.imread(str(scene_dir("walk") / "gt_masks" / cam.name / "0000.png"), cv2.IMREAD_GRAYSCALE) > 127
+        iou = (truth & ev.mask).sum() / (truth | ev.mask).sum()
+        print(f"{cam.name}: median landmark error {np.median(errors):.1f} px, mask IoU {iou:.3f}")
+        assert np.median(errors) < 12.0
+        assert iou >= 0.85
+
+
+def test_a_crop_without_the_person_is_found_again_or_given_up(walk_frame):
+    capture, names, positions = walk_frame
+    cam = capture.cameras[0]
+    image = capture.frames.read(0)[cam.name]
+    uv = cam.project(positions[0])
+    far = CropBox(40.0, 40.0, 60.0)  # an empty corner of the room
+    truth_box = crop_around(uv)
+    fg = np.zeros(image.shape[:2], bool)
+    x0, y0 = (truth_box.to_image([[40, 20]])[0]).astype(int)
+    x1, y1 = (truth_box.to_image([[216, 236]])[0]).astype(int)
+    fg[max(0, y0):y1, max(0, x0):x1] = True  # a person-shaped foreground blob where the person is
+    model = LandmarkModel()
+    lost = locate(model, [image], [far])[0]
+    assert not lost.found and lost.box is None and np.isnan(lost.mask_prob).all()
+    refound = locate(model, [image], [far], foreground=lambda i: fg)[0]
+    assert refound.found
+    assert np.median(np.linalg.norm(refound.keypoints[[11, 12, 23, 24]] - uv[[names.index(b) for b in
+                                    ("LeftArm", "RightArm", "LeftUpLeg", "RightUpLeg")]], axis=1)) < 15
+
+
+# ------------------------------------------------------------------------------------------ the keypoint term
+@pytest.fixture(scope="module")
+def walk_truth():
+    pytest.importorskip("bpy")
+    from markerless_mocap.core.capture.capture import load_capture
+    from markerless_mocap.core.keypoints import rig_keypoints
+
+    body, frames, poses, _ = ground_truth_poses("walk")
+    capture = load_capture(scene_dir("walk"))
+    return body, poses, capture.cameras, rig_keypoints(body)
+
+
+def synthetic_evidence(body, pose, cameras, rig_points, noise_px=0.0, seed=0):
+    """ViewEvidence per camera with the landmarks at the projected rig points of `pose`."""
+    rng = np.random.default_rng(seed)
+    pts = rig_points.world(body, pose[None])[0]
+    out = []
+    for cam in cameras:
+        kp = np.full((33, 2), np.nan)
+        vis = np.zeros(33)
+        kp[rig_points.landmarks] = cam.project(pts) + rng.normal(0, noise_px, (len(pts), 2))
+        vis[rig_points.landmarks] = 0.95
+        out.append(ViewEvidence(np.zeros((cam.height, cam.width), np.float32), kp, vis, 1.0,
+                                crop_around(cam.project(body.joint_positions(pose[None])[0]))))
+    return out
+
+
+def keypoint_term(body, cameras, evidence, poses):
+    from markerless_mocap.core.features.learned import CROP_MARGIN
+    from markerless_mocap.core.keypoints import KeypointTargets, keypoint_energy, rig_keypoints
+
+    rig = rig_keypoints(body)
+    targets = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN)
+    pts = rig.world(body, np.atleast_2d(poses))
+    P, K = pts.shape[:2]
+    projected = np.stack([c.project(pts.reshape(-1, 3)).reshape(P, K, 2) for c in cameras], axis=1)
+    return keypoint_energy(projected, targets, rig.swap)
+
+
+def test_rig_points_sit_on_the_joints(walk_truth):
+    body, poses, cameras, rig = walk_truth
+    heads = body.joint_positions(poses[:1])[0]
+    pts = rig.world(body, poses[:1])[0]
+    index = body.skeleton.index
+    for lm, bone in LIMB_LANDMARKS.items():
+        k = list(rig.landmarks).index(lm)
+        assert np.linalg.norm(pts[k] - heads[index[bone]]) < 1e-9
+    nose = pts[list(rig.landmarks).index(0)]
+    assert nose[2] > heads[index["Neck1"]][2]  # above the neck, on the face
+
+
+def test_keypoint_term_prefers_the_truth_to_perturbations(walk_truth):
+    body, poses, cameras, rig = walk_truth
+    truth = poses[20]
+    evidence = synthetic_evidence(body, truth, cameras, rig, noise_px=3.0)
+    rng = np.random.default_rng(5)
+    scale = np.where(np.isin(np.arange(body.n_dof), body.translation_dofs), 0.05, np.deg2rad(10.0))
+    perturbed = body.clamp(truth + rng.normal(0, 1, (300, body.n_dof)) * scale)
+    e = keypoint_term(body, cameras, evidence, np.vstack([truth, perturbed]))
+    assert 0 <= e[0] < 0.2  # 3 px of noise against a 10 px sigma: about 0.13
+    assert (e[1:] > e[0]).mean() >= 0.97
+
+
+def test_a_view_with_swapped_sides_does_not_pull_the_fit(walk_truth):
+    from markerless_mocap.core.features.learned import SWAP_ORDER
+
+    body, poses, cameras, rig = walk_truth
+    truth = poses[20]
+    clean = synthetic_evidence(body, truth, cameras, rig)
+    swapped = synthetic_evidence(body, truth, cameras, rig)
+    swapped[1].keypoints = swapped[1].keypoints[SWAP_ORDER]  # one view labels every side the other way
+    # The truth costs the same with the swapped view, and stays the best of its perturbations.
+    e_clean = keypoint_term(body, cameras, clean, truth[None])[0]
+    e_swapped = keypoint_term(body, cameras, swapped, truth[None])[0]
+    assert e_swapped == pytest.approx(e_clean, abs=1e-9)
+    rng = np.random.default_rng(6)
+    scale = np.where(np.isin(np.arange(body.n_dof), body.translation_dofs), 0.03, np.deg2rad(6.0))
+    perturbed = body.clamp(truth + rng.normal(0, 1, (200, body.n_dof)) * scale)
+    e = keypoint_term(body, cameras, swapped, np.vstack([truth, perturbed]))
+    assert (e[1:] > e[0]).all()
+
+
+def test_views_without_landmarks_are_left_out(walk_truth):
+    body, poses, cameras, rig = walk_truth
+    truth = poses[20]
+    evidence = synthetic_evidence(body, truth, cameras, rig, noise_px=2.0)
+    wrong = synthetic_evidence(body, poses[40], cameras, rig)
+    with_lost_view = evidence[:3] + [ViewEvidence.empty(cameras[3].width, cameras[3].height)]
+    three = keypoint_term(body, cameras[:3], evidence[:3], truth[None])[0]
+    assert keypoint_term(body, cameras, with_lost_view, truth[None])[0] == pytest.approx(three)
+    assert keypoint_term(body, cameras, wrong, truth[None])[0] > 5 * three
+
+
+def test_first_frame_from_keypoints_recovers_the_pose(walk_truth):
+    """Landmarks with 3 px noise, one view's sides swapped, the start 15 cm and 20 degrees off in a neutral
+    posture: the fitted pose's joints within 40 mm of the truth on average (measured about 20 mm)."""
+    from markerless_mocap.core.features.learned import CROP_MARGIN, SWAP_ORDER
+    from markerless_mocap.core.keypoint_fit import pose_from_keypoints
+    from markerless_mocap.core.keypoints import KeypointTargets
+    from markerless_mocap.core.rotations import matrix_to_rotvec, rotvec_to_matrix
+
+    body, poses, cameras, rig = walk_truth
+    truth = poses[30]
+    evidence = synthetic_evidence(body, truth, cameras, rig, noise_px=3.0, seed=2)
+    evidence[2].keypoints = evidence[2].keypoints[SWAP_ORDER]
+    targets = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN)
+    start = body.default_pose()
+    start[body.translation_dofs] = truth[body.translation_dofs] + [0.15, -0.05, 0.0]
+    yaw = rotvec_to_matrix(np.array([0.0, 0.0, np.deg2rad(20.0)]))
+    start[body.root_rotation_dofs] = matrix_to_rotvec(yaw @ rotvec_to_matrix(truth[body.root_rotation_dofs]))
+    pose, n_points, rms = pose_from_keypoints(body, cameras, targets, rig, start)
+    error = np.linalg.norm(body.joint_positions(pose[None])[0] - body.joint_positions(truth[None])[0], axis=1)
+    print(f"{n_points} points triangulated, rms {1000 * rms:.1f} mm, mean joint error {1000 * error.mean():.1f} mm")
+    assert n_points == len(rig.landmarks)
+    assert error.mean() < 0.04
+
+
+def test_icp_keypoint_gradient_matches_finite_differences(walk_truth):
+    """The analytic keypoint block of ICP's normal equations: its gradient equals the numerical one of
+    the keypoint cost (a Huber threshold wide enough that every residual is in its quadratic zone)."""
+    from markerless_mocap.core.features.learned import CROP_MARGIN
+    from markerless_mocap.core.keypoints import KeypointTargets
+    from markerless_mocap.core.optimizers import PoseSpace
+    from markerless_mocap.core.optimizers.icp import IcpProblem, IcpSettings, IcpSolver
+    from markerless_mocap.core.proxy import make_proxy
+
+    body, poses, cameras, rig = walk_truth
+    truth = poses[20]
+    evidence = synthetic_evidence(body, truth, cameras, rig, noise_px=1.0, seed=3)
+    targets = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN)
+    space = PoseSpace.with_default_scale(body.lower, body.upper, body.dof_names,
+                                         np.isin(np.arange(body.n_dof), body.translation_dofs))
+    sils = [np.zeros((c.height, c.width), bool) for c in cameras]
+    problem = IcpProblem(body=body, proxy=make_proxy(body), cameras=cameras, silhouettes=sils,
+                         keypoints=targets, rig_points=rig)
+    solver = IcpSolver(problem, space, IcpSettings(keypoint_huber=50.0))
+    x = truth.copy()
+    assignment = solver._keypoint_assignment(x)
+    _, g, cost = solver._keypoint_normal_equations(x, assignment)
+    assert cost == pytest.approx(solver._keypoint_cost(x, assignment))
+    joints = np.setdiff1d(np.arange(body.n_dof), body.root_rotation_dofs)  # the root rotation is a left increment
+    h = 1e-6
+    numeric = np.array([(solver._keypoint_cost(x + h * np.eye(body.n_dof)[i], assignment)
+                         - solver._keypoint_cost(x - h * np.eye(body.n_dof)[i], assignment)) / (2 * h)
+                        for i in joints])
+    assert np.allclose(g[joints], numeric, rtol=1e-3, atol=1e-3 * np.abs(numeric).max())
