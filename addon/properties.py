@@ -22,6 +22,14 @@ LIKELIHOODS = (
                                                     "histograms (slowest, best on clothes with distinct colours)"),
     ("silh", "Silhouette", "Binary silhouette overlap only"),
     ("silhch", "Chamfer silhouette", "Chamfer silhouette distance only"),
+    ("lsilh+edge+kp", "Learned mask + edges + keypoints",
+     "Silhouette from the learned person mask, image edges and learned 2D body keypoints (robust to "
+     "changing light, clutter and people in the background)"),
+    ("lsilh+edge", "Learned mask + edges", "Silhouette from the learned person mask and image edges"),
+    ("silh+edge+kp", "Silhouette + edges + keypoints",
+     "Background-subtraction silhouette, image edges and learned 2D body keypoints"),
+    ("lsilh+kp", "Learned mask + keypoints", "Learned person mask and learned 2D body keypoints"),
+    ("kp", "Keypoints", "Learned 2D body keypoints only (with the anatomical prior)"),
 )
 
 BACKENDS = (

@@ -32,6 +32,16 @@ def draw_body(image, camera, vertices, faces, face_part, colours, alpha=0.45):
     return out
 
 
+def draw_landmarks(image, uv, visibility, min_visibility=0.5):
+    """The learned landmarks the frame was solved with: person's left in green, right in magenta."""
+    for k, (point, vis) in enumerate(zip(uv, visibility)):
+        if vis < min_visibility or not np.all(np.isfinite(point)):
+            continue
+        colour = (0, 255, 0) if k % 2 == 1 else (255, 0, 255) if k > 0 else (255, 255, 255)
+        cv2.circle(image, (int(round(point[0])), int(round(point[1]))), 3, colour, -1, cv2.LINE_AA)
+    return image
+
+
 class OverlayWriter:
     """One mp4 per camera in <out>/overlay/, a frame appended per solved frame."""
 
@@ -42,10 +52,12 @@ class OverlayWriter:
         self.fps = fps
         self.writers = {}
 
-    def add(self, images, vertices, faces, face_part, n_parts, label=""):
+    def add(self, images, vertices, faces, face_part, n_parts, label="", landmarks=None, visibility=None):
         colours = part_colours(n_parts)
-        for cam in self.cameras:
+        for c, cam in enumerate(self.cameras):
             img = draw_body(images[cam.name], cam, vertices, faces, face_part, colours)
+            if landmarks is not None:
+                draw_landmarks(img, landmarks[c], visibility[c])
             if label:
                 cv2.putText(img, label, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
             w = self.writers.get(cam.name)

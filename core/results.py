@@ -3,6 +3,7 @@ any reason keeps what it solved, and `--resume` continues from the checkpoint ex
 
     joints.npz   names, frames, positions (F,J,3) world metres (every bone's head)
     poses.npz    dof_names, frames, poses (F,D)
+    keypoints.npz  with learned evidence: frames, cameras, uv (F,C,33,2) image pixels, visibility (F,C,33)
     report.json  settings, seed, per-frame energy and seconds, totals, software versions
     checkpoint.pkl  the tracker's state after the last solved frame (optimiser particles, RNG, colour model)
 """
@@ -71,6 +72,13 @@ class ResultWriter:
         _atomic_write(self.out / "joints.npz", lambda fh: np.savez(fh, names=names, frames=frames, positions=joints))
         _atomic_write(self.out / "poses.npz", lambda fh: np.savez(
             fh, dof_names=np.array(self.body.dof_names), frames=frames, poses=poses))
+        with_landmarks = [e for e in est if getattr(e, "landmarks", None) is not None]
+        if with_landmarks:  # the learned 2D evidence each frame was solved with
+            _atomic_write(self.out / "keypoints.npz", lambda fh: np.savez(
+                fh, frames=np.array([e.frame for e in with_landmarks], dtype=np.int64),
+                cameras=np.array(self.info.get("cameras", [])),
+                uv=np.array([e.landmarks for e in with_landmarks]),
+                visibility=np.array([e.landmark_visibility for e in with_landmarks])))
         report = {
             "settings": self.settings.to_dict(),
             "seed": self.settings.seed,

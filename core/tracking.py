@@ -115,6 +115,10 @@ class FrameEstimate:
     energy: float
     seconds: float
     evaluations: int
+    # The learned landmarks the frame was solved with, per camera: (C,33,2) image pixels and (C,33)
+    # visibility (0 where a view had none); None without learned evidence.
+    landmarks: np.ndarray | None = None
+    landmark_visibility: np.ndarray | None = None
 
 
 class Tracker:
@@ -433,6 +437,10 @@ class Tracker:
         self.history = self.history[-3:]
         joints = self.body.joint_positions(pose[None])[0]
         est = FrameEstimate(int(frame), pose, joints, float(energy), float(seconds), int(evaluations))
+        if self.evidence is not None:
+            est.landmarks = np.stack([ev.keypoints for ev in self.evidence])
+            est.landmark_visibility = np.stack([ev.visibility if ev.found else np.zeros_like(ev.visibility)
+                                                for ev in self.evidence])
         self.estimates.append(est)
         return est
 

@@ -3,10 +3,11 @@ import sys
 import time
 from pathlib import Path
 
+from ..core.likelihood import LIKELIHOODS
 from ..core.tracking import TrackingSettings
 
 ALGORITHMS = ("isa", "apf", "pf", "fsa", "icp")
-LIKELIHOOD_NAMES = ("silh+edge", "silh+edgech", "silhch+color", "silh", "silhch")
+LIKELIHOOD_NAMES = tuple(LIKELIHOODS)
 
 
 def parse_frames(text):
@@ -25,8 +26,9 @@ def parse_frames(text):
 
 def add_tracking_options(p):
     p.add_argument("--algorithm", choices=ALGORITHMS, default="isa", help="optimiser (default: isa)")
-    p.add_argument("--likelihood", choices=LIKELIHOOD_NAMES, default="silh+edge",
-                   help="energy terms (default: silh+edge)")
+    p.add_argument("--likelihood", choices=LIKELIHOOD_NAMES, default=TrackingSettings.likelihood,
+                   help=f"energy terms (default: {TrackingSettings.likelihood}; 'l' = the learned person mask, "
+                        "'kp' = learned 2D keypoints)")
     p.add_argument("--particles", type=int, default=200, help="particles (ISA/APF); budget = particles x iterations")
     p.add_argument("--iterations", type=int, default=15, help="annealing iterations/layers per frame")
     p.add_argument("--seed", type=int, default=0)

@@ -104,6 +104,10 @@ class TrackSession:
             est = self.tracker.initialise(frame, rough_pose=self.rough_pose)
         else:
             est = self.tracker.track(frame)
+        if self.tracker.keypoint_fit is not None:
+            self.writer.info["first_frame_keypoint_fit"] = self.tracker.keypoint_fit
+        if self.tracker.recoveries:
+            self.writer.info["limb_recoveries"] = self.tracker.recoveries
         self.writer.add(est, self.tracker.state())
         return est
 
@@ -152,7 +156,9 @@ class TrackSession:
             for est in self.writer.estimates:
                 verts = proxy.deform(self.body, est.pose[None])[0]
                 writer.add(self.capture.frames.read(est.frame), verts, proxy.faces, proxy.face_part,
-                           len(proxy.part_names), label=f"frame {est.frame}  V={est.energy:.3f}")
+                           len(proxy.part_names), label=f"frame {est.frame}  V={est.energy:.3f}",
+                           landmarks=getattr(est, "landmarks", None),
+                           visibility=getattr(est, "landmark_visibility", None))
         finally:
             writer.close()
         return writer.folder

@@ -237,3 +237,11 @@ def test_fast_and_reference_energies_agree_on_the_body(bpy_module):
     assert t_ref["silh"][0] == 0 and t_ref["silh_ch"][0] == 0 and t_ref["edge"][0] == 0
     assert t_ref["color"][0] == pytest.approx(0, abs=1e-9)
     assert np.all(t_ref["silh"][1:] > 0.02)
+
+
+def test_every_named_likelihood_is_offered_in_the_panel_and_on_the_command_line():
+    pytest.importorskip("bpy")
+    from markerless_mocap.addon.properties import LIKELIHOODS as PANEL
+    from markerless_mocap.operators.cmd_track import LIKELIHOOD_NAMES
+
+    assert sorted(item[0] for item in PANEL) == sorted(lk.LIKELIHOODS) == sorted(LIKELIHOOD_NAMES)
