@@ -115,6 +115,31 @@ def _capture_scene(folder, body, scale):
         return None
 
 
+def _learned_evidence_seconds(capture_dir, cameras, body, pose, repeats):
+    """Seconds per frame of the learned evidence for every view: crops around the pose, one batched
+    forward pass, landmarks and masks back in image pixels (the capture's frame 0, else grey images)."""
+    from ..core.features.learned import LandmarkModel, crop_around, locate
+
+    images = None
+    if capture_dir and Path(capture_dir).is_dir():
+        try:
+            from ..core.capture.capture import load_capture
+
+            capture = load_capture(capture_dir)
+            frame = capture.frames.read(0)
+            images = [frame[c.name] for c in cameras]
+            capture.close()
+        except Exception:  # noqa: BLE001  (any unusable capture: time on synthetic images)
+            images = None
+    if images is None:
+        images = [np.full((c.height, c.width, 3), 128, np.uint8) for c in cameras]
+    model = LandmarkModel()
+    joints = body.joint_positions(pose[None])[0]
+    boxes = [crop_around(c.project(joints)) for c in cameras]
+    model.evidence(images, boxes)  # warm up
+    return _best(lambda: locate(model, images, boxes), repeats)
+
+
 def synthetic_features(model, pose):
     from ..core.features.view_features import ViewFeatures, distance_to_mask
     from ..core.features.view_features import EDGE_DT_CAP_PX
@@ -199,7 +224,10 @@ def run(args):
     ab = np.random.default_rng(4).normal(0, 20, (480, 640, 2)).astype(np.float32)
     diffusion = _best(lambda: edge_enhancing_diffusion(ab, steps=5), args.repeats)
     print(f"colour features: edge-enhancing diffusion (AOS, 5 steps) of a 640x480 a/b image: {diffusion * 1e3:.0f} ms")
-    print(json.dumps({"reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
+    learned = _learned_evidence_seconds(args.capture, cameras, body, observed, args.repeats)
+    print(f"learned evidence (BlazePose crops, landmarks and person masks), {len(cameras)} views: "
+          f"{learned * 1e3:.0f} ms per frame")
+    print(json.dumps({"learned_evidence_s": round(learned, 4), "reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
                       "fk_lbs_s": round(fk, 4), "diffusion_vga_s": round(diffusion, 4), "fast_cpu_s": round(fast_cpu, 4), "poses": args.poses, "views": len(cameras),
                       "resolution": f"{w}x{h}", "backend": backend, "likelihood": args.likelihood,
                       "reference_poses_timed": n_ref, "energies_agree": bool(agree), "threads": _threads(),
