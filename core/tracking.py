@@ -48,7 +48,7 @@ class TrackingSettings:
     iterations: int = 15
     seed: int = 0
     backend: str = "auto"
-    energy_scale: float | None = None  # None: the EnergyModel's default resolution
+    energy_scale: float | None = None  # None: from the person's size in the views (likelihood.energy_scale_for)
     background: str = "auto"  # auto (plate if present, else median) | plate | median | mog2 | knn
     background_frames: int = 25
     proxy_triangles: int = 2000
@@ -131,7 +131,12 @@ class Tracker:
         self.capture = capture
         self.settings = settings or TrackingSettings()
         self.proxy = proxy or make_proxy(body, self.settings.proxy_triangles)
-        kwargs = {} if self.settings.energy_scale is None else {"scale": self.settings.energy_scale}
+        from .likelihood import energy_scale_for
+
+        scale = self.settings.energy_scale
+        if scale is None:  # the person (as the subject is placed) about 120 energy pixels tall
+            scale = energy_scale_for(body, capture.cameras, body.default_pose())
+        kwargs = {"scale": scale}
         self.energy = energy_model or EnergyModel(body, self.proxy, capture.cameras, self.settings.likelihood,
                                                   prior=prior, backend=self.settings.backend, **kwargs)
         self.scale = self.energy.scale

@@ -247,3 +247,17 @@ def test_icp_keypoint_gradient_matches_finite_differences(walk_truth):
                          - solver._keypoint_cost(x - h * np.eye(body.n_dof)[i], assignment)) / (2 * h)
                         for i in joints])
     assert np.allclose(g[joints], numeric, rtol=1e-3, atol=1e-3 * np.abs(numeric).max())
+
+
+def test_energy_resolution_follows_the_person_not_the_footage(walk_truth):
+    """The walk keeps the 0.5 its figures were measured at; the same views filmed at 3x the resolution get a
+    third of it, so the person spans the same number of energy pixels."""
+    from markerless_mocap.core.likelihood import ENERGY_PERSON_PX, energy_scale_for
+
+    body, poses, cameras, _ = walk_truth
+    assert energy_scale_for(body, cameras, poses[0]) == 0.5
+    big = [c.scaled(3.0) for c in cameras]
+    heights = [np.ptp(c.project(body.joint_positions(poses[:1])[0])[:, 1]) for c in big]
+    scale = energy_scale_for(body, big, poses[0])
+    assert scale == pytest.approx(ENERGY_PERSON_PX / np.median(heights))
+    assert 0.1 < scale < 0.25
