@@ -41,6 +41,9 @@ DEFAULT_ROWS = (
     Row("ISA (s+e)", "isa", "silh+edge"),
     Row("ISA (s+e)", "isa", "silh+edge", split="half"),
     Row("ISA + ICP refinement (s+e)", "isa", "silh+edge", "icp"),
+    # Learned evidence (core/features/learned.py): the learned person mask for the silhouette, and 2D keypoints.
+    Row("ISA (ls+e+kp)", "isa", "lsilh+edge+kp"),
+    Row("ISA + ICP refinement (ls+e+kp)", "isa", "lsilh+edge+kp", "icp"),
 )
 
 
