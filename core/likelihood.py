@@ -12,7 +12,13 @@ Terms (all unweighted values are normalised averages, O(1)):
   color    per-part a/b 64-bin histograms vs the colour model, Bhattacharyya, w_s = part area share, parts with
            < 20 visible pixels (all views together) count as 1 (eq. 10, A13); model set at frame 1 and adapted
            with eq. 12 (sample-size weighted, M <- (1-lam) M + lam M_hat, A15)
+  keypoint learned 2D landmarks (core/features/learned.py) against the projected rig points they stand for
+           (core/keypoints.py): visibility-weighted robust distance in units of the person's size, each view's
+           left/right pairs taken in whichever assignment fits, mean over the views with landmarks [DESIGN]
   anat     anatomical prior (core/prior.py, eqs. 13-14)
+
+The silhouette terms read the observed mask from background subtraction (mask="background", the paper) or
+from the learned person mask (mask="learned"; the names starting with "l").
 
 Energy resolution: ENERGY_SCALE = 0.5 of the capture (320x240 for 640x480) [DESIGN, measured].
 * Detail: a person 3-4 m away fills ~200-250 px at 640x480, so at 0.5 a pixel is ~14-17 mm on the body and a
@@ -33,6 +39,8 @@ Default weights (LIKELIHOODS; lambda_anat = 2.0 in all [SEED]):
   "silh+edgech"   30    -        -     2        -      -      as above [DESIGN]
   "silhch+color"  -     2        -     -        40     0.2    all [SEED] (Maria1 adaptation 0.2, Maria2 0.3, HumanEva 0)
   "silhch"        -     2        -     -        -      -      lambda as in s^Ch + c [SEED value reused, DESIGN]
+  learned evidence: "lsilh+edge" (30, edge 2, learned mask), "silh+edge+kp" and "lsilh+edge+kp" (the same
+  plus keypoint 20), "lsilh+kp" (30, keypoint 20), "kp" (keypoint 20) [DESIGN]
 """
 from __future__ import annotations
 

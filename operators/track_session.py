@@ -12,6 +12,8 @@ import numpy as np
 
 from ..addon import scene_bridge
 from ..core.capture.capture import load_capture
+from ..core.features.learned import require_model
+from ..core.likelihood import resolve_weights
 from ..core.results import ResultWriter
 from ..core.tracking import Tracker, TrackingSettings
 
@@ -39,6 +41,8 @@ class TrackSession:
         self.log = log or (lambda msg: None)
         self.body = scene_bridge.body_from_blender(armature_obj, mesh_obj, scene)
         self.capture = load_capture(capture_dir, units=units)
+        if resolve_weights(self.settings.likelihood).needs_learned_evidence:
+            require_model()  # a clear error now, not a traceback at the first frame
         n = self.capture.frames.n_frames
         self.all_frames = list(range(n)) if frames is None else [f for f in frames if 0 <= f < n]
         if not self.all_frames:

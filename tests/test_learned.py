@@ -261,3 +261,16 @@ def test_energy_resolution_follows_the_person_not_the_footage(walk_truth):
     scale = energy_scale_for(body, big, poses[0])
     assert scale == pytest.approx(ENERGY_PERSON_PX / np.median(heights))
     assert 0.1 < scale < 0.25
+
+
+def test_track_without_the_model_file_says_so_and_how_to_fix_it(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("bpy")
+    from markerless_mocap.core.features import learned
+    from markerless_mocap.operators.cli import main
+
+    monkeypatch.setattr(learned, "MODEL_PATH", tmp_path / "missing.tflite")
+    code = main(["track", "--scene", str(scene_dir("walk") / "subject.blend"), "--capture", str(scene_dir("walk")),
+                 "--out", str(tmp_path / "out"), "--frames", "0-1", "--likelihood", "lsilh+edge+kp"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "landmark model" in err and "reinstall the extension" in err and "Traceback" not in err

@@ -146,14 +146,21 @@ class ViewEvidence:
                    np.zeros(N_LANDMARKS), 0.0, None)
 
 
+def require_model(path=None):
+    """The model file's path; a LearnedModelError naming the fix when it is missing."""
+    path = Path(MODEL_PATH if path is None else path)
+    if not path.is_file():
+        raise LearnedModelError(f"the landmark model {path} is missing: it ships with the extension "
+                                "(core/data/models/); reinstall the extension or restore that file, or choose "
+                                "a likelihood without learned evidence (e.g. silh+edge)")
+    return path
+
+
 class LandmarkModel:
     """BlazePose 'full' landmarks + segmentation in OpenCV's DNN, batched over crops."""
 
-    def __init__(self, path=MODEL_PATH):
-        path = Path(path)
-        if not path.is_file():
-            raise LearnedModelError(f"the landmark model {path} is missing: it ships with the extension "
-                                    "(core/data/models/); reinstall the extension or restore that file")
+    def __init__(self, path=None):
+        path = require_model(path)
         try:
             self.net = cv2.dnn.readNetFromTFLite(str(path))
         except cv2.error as exc:
