@@ -11,17 +11,30 @@ def part_colours(n):
     return [tuple(int(255 * c) for c in colorsys.hsv_to_rgb(i / max(n, 1), 0.8, 1.0))[::-1] for i in range(n)]
 
 
+def _triangles_far_to_near(camera, vertices, faces):
+    """Sub-pixel triangle corners (4 fractional bits) and the order to paint them, far to near, in front
+    of the camera only."""
+    uv, depth = camera.project_with_depth(vertices)
+    front = np.all(depth[faces] > 1e-3, axis=1)
+    order = [f for f in np.argsort(-depth[faces].mean(axis=1)) if front[f]]
+    return np.round(uv[faces] * 16).astype(np.int32), order
+
+
+def model_mask(camera, vertices, faces):
+    """bool HxW: where the posed body covers camera's image (for overlays and coverage figures)."""
+    pts, order = _triangles_far_to_near(camera, vertices, faces)
+    mask = np.zeros((camera.height, camera.width), np.uint8)
+    for f in order:
+        cv2.fillConvexPoly(mask, pts[f], 255, shift=4)
+    return mask > 0
+
+
 def draw_body(image, camera, vertices, faces, face_part, colours, alpha=0.45):
     """Painter's algorithm (far to near) with per-part colours, blended over `image` (BGR uint8)."""
-    uv, depth = camera.project_with_depth(vertices)
-    tri_depth = depth[faces].mean(axis=1)
-    front = np.all(depth[faces] > 1e-3, axis=1)
+    pts, order = _triangles_far_to_near(camera, vertices, faces)
     layer = image.copy()
     mask = np.zeros(image.shape[:2], np.uint8)
-    pts = np.round(uv[faces] * 16).astype(np.int32)  # 4 fractional bits for sub-pixel edges
-    for f in np.argsort(-tri_depth):
-        if not front[f]:
-            continue
+    for f in order:
         cv2.fillConvexPoly(layer, pts[f], colours[face_part[f]], lineType=cv2.LINE_AA, shift=4)
         cv2.fillConvexPoly(mask, pts[f], 255, shift=4)
     out = image.copy()
@@ -71,3 +84,18 @@ class OverlayWriter:
         for w in self.writers.values():
             w.release()
         self.writers = {}
+
+
+def contact_sheet(rows, cell_height=360, label_rows=None):
+    """A grid image: rows of equally tall cells (BGR images of any size), each row labelled on its left."""
+    out_rows = []
+    for r, cells in enumerate(rows):
+        resized = [cv2.resize(c, (max(1, round(c.shape[1] * cell_height / c.shape[0])), cell_height),
+                              interpolation=cv2.INTER_AREA) for c in cells]
+        row = np.hstack(resized)
+        if label_rows is not None:
+            cv2.putText(row, label_rows[r], (8, cell_height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2,
+                        cv2.LINE_AA)
+        out_rows.append(row)
+    width = max(r.shape[1] for r in out_rows)
+    return np.vstack([np.pad(r, ((0, 0), (0, width - r.shape[1]), (0, 0))) for r in out_rows])

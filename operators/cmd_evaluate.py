@@ -1,13 +1,22 @@
-"""`evaluate`: 3D error of a result folder against ground-truth joints."""
+"""`evaluate`: a result folder against ground-truth joints, or, without ground truth (real footage),
+against the learned evidence found afresh around its poses; optionally a contact sheet of the overlays."""
+import json
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from ..core.evaluation import EvaluationError, joint_errors, plot_per_frame, summarise
 
 
 def add_arguments(p):
-    p.add_argument("--result", type=Path, required=True, help="result folder (holding joints.npz)")
-    p.add_argument("--truth", type=Path, required=True, help="ground truth joints (gt_joints.npz)")
+    p.add_argument("--result", type=Path, required=True, help="result folder (holding joints.npz, poses.npz)")
+    p.add_argument("--truth", type=Path, help="ground truth joints (gt_joints.npz); without it, the agreement "
+                                              "with the learned evidence is measured (needs --capture)")
+    p.add_argument("--capture", type=Path, help="the capture folder the result was tracked on")
+    p.add_argument("--scene", type=Path, help="SUBJECT.blend tracked (default: CAPTURE/subject.blend)")
+    p.add_argument("--sheet", type=Path, help="write a contact sheet PNG: every view, every --every frames")
+    p.add_argument("--every", type=int, default=10, help="frame step of the contact sheet (default 10)")
     p.add_argument("--plot", type=Path, help="per-frame error plot (default: RESULT/error_per_frame.png)")
 
 
@@ -19,12 +28,8 @@ def evaluate(result_dir, truth, plot=None):
     return summary, plot
 
 
-def run(args):
-    try:
-        summary, plot = evaluate(args.result, args.truth, args.plot)
-    except (EvaluationError, FileNotFoundError) as exc:
-        print(f"markerless_mocap evaluate: {exc}", file=sys.stderr)
-        return 2
+def _print_truth(args):
+    summary, plot = evaluate(args.result, args.truth, args.plot)
     print(f"frames: {summary.frames}")
     print(f"3D error over 15 joints: {summary.mean_mm:.1f} +- {summary.std_mm:.1f} mm (median "
           f"{summary.median_mm:.1f}, max {summary.max_mm:.1f})")
@@ -32,4 +37,86 @@ def run(args):
     print("per joint (mm): " + ", ".join(f"{k} {v:.0f}" for k, v in summary.per_joint_mm.items()))
     print(f"plot: {plot}")
     print(summary.json_line(result=str(args.result)))
+
+
+def _load_result(result_dir):
+    with np.load(Path(result_dir) / "poses.npz") as d:
+        return d["frames"].astype(np.int64), d["poses"]
+
+
+def _subject(args):
+    from ..addon.scene_bridge import body_from_blender, find_armature
+    from .cmd_track import open_subject
+
+    scene = open_subject(args.scene or args.capture / "subject.blend")
+    return body_from_blender(find_armature(scene), None, scene)
+
+
+def _agreement(args, body, capture, proxy, frames, poses):
+    from ..core.evidence_agreement import result_agreement, summarise_agreement
+    from ..core.features.learned import LandmarkModel
+    from ..core.keypoints import rig_keypoints
+
+    per_view = result_agreement(body, proxy, capture.cameras, capture.frames.read, frames, poses,
+                                rig_keypoints(body), LandmarkModel())
+    summary = summarise_agreement(per_view)
+    print(f"agreement with the learned evidence over {len(frames)} frames (no ground truth):")
+    print("| view | mask covers the model | IoU with the mask | keypoint distance (px) |")
+    print("|---|---|---|---|")
+    for name, s in summary.items():
+        print(f"| {name} | {s['coverage']:.3f} | {s['iou']:.3f} | {s['keypoint_px']:.1f} |")
+    print(json.dumps({"result": str(args.result), "frames": len(frames), "agreement": summary}))
+
+
+def _sheet(args, body, capture, proxy, frames, poses):
+    import cv2
+
+    from ..core.overlay import contact_sheet, draw_body, draw_landmarks, part_colours
+
+    landmarks = {}
+    path = Path(args.result) / "keypoints.npz"
+    if path.is_file():
+        with np.load(path) as d:
+            landmarks = {int(f): (uv, vis) for f, uv, vis in zip(d["frames"], d["uv"], d["visibility"])}
+    colours = part_colours(len(proxy.part_names))
+    rows, labels = [], []
+    for frame, pose in list(zip(frames, poses))[::max(1, args.every)]:
+        images = capture.frames.read(int(frame))
+        vertices = proxy.deform(body, pose[None])[0]
+        cells = []
+        for c, cam in enumerate(capture.cameras):
+            img = draw_body(images[cam.name], cam, vertices, proxy.faces, proxy.face_part, colours)
+            if int(frame) in landmarks:
+                uv, vis = landmarks[int(frame)]
+                draw_landmarks(img, uv[c], vis[c])
+            cells.append(img)
+        rows.append(cells)
+        labels.append(f"frame {frame}")
+    args.sheet.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(args.sheet), contact_sheet(rows, label_rows=labels))
+    print(f"contact sheet: {args.sheet} ({len(rows)} frames x {len(capture.cameras)} views)")
+
+
+def run(args):
+    try:
+        if args.truth is not None:
+            _print_truth(args)
+        elif args.capture is None:
+            raise EvaluationError("give --truth gt_joints.npz, or --capture CAPTURE to measure against the "
+                                  "learned evidence when there is no ground truth")
+        if args.capture is not None and (args.truth is None or args.sheet is not None):
+            from ..core.capture.capture import load_capture
+            from ..core.proxy import make_proxy
+
+            body = _subject(args)
+            capture = load_capture(args.capture)
+            proxy = make_proxy(body)
+            frames, poses = _load_result(args.result)
+            if args.truth is None:
+                _agreement(args, body, capture, proxy, frames, poses)
+            if args.sheet is not None:
+                _sheet(args, body, capture, proxy, frames, poses)
+    except (EvaluationError, FileNotFoundError, ValueError) as exc:
+        print(f"markerless_mocap evaluate: {exc}", file=sys.stderr)
+        return 2
     return 0

@@ -274,3 +274,28 @@ def test_track_without_the_model_file_says_so_and_how_to_fix_it(tmp_path, monkey
     err = capsys.readouterr().err
     assert code == 2
     assert "landmark model" in err and "reinstall the extension" in err and "Traceback" not in err
+
+
+def test_agreement_figures_of_a_model_on_and_off_the_person(walk_truth):
+    """Coverage, IoU and keypoint distance: 1, 1 and 0 px for evidence made from the model itself; a model
+    30 cm to the side of that person loses coverage and is tens of pixels from the landmarks."""
+    from markerless_mocap.core.evidence_agreement import view_agreement
+    from markerless_mocap.core.overlay import contact_sheet, model_mask
+    from markerless_mocap.core.proxy import make_proxy
+
+    body, poses, cameras, rig = walk_truth
+    proxy = make_proxy(body)
+    truth = poses[20]
+    cam = cameras[0]
+    evidence = synthetic_evidence(body, truth, [cam], rig)[0]
+    vertices = proxy.deform(body, truth[None])[0]
+    evidence.mask_prob = model_mask(cam, vertices, proxy.faces).astype(np.float32)
+    on = view_agreement(cam, evidence, vertices, proxy.faces, cam.project(rig.world(body, truth[None])[0]), rig)
+    assert (on.coverage, on.iou, on.keypoint_px) == (1.0, 1.0, pytest.approx(0.0, abs=1e-6))
+    moved = truth.copy()
+    moved[body.translation_dofs[0]] += 0.3
+    v_off = proxy.deform(body, moved[None])[0]
+    off = view_agreement(cam, evidence, v_off, proxy.faces, cam.project(rig.world(body, moved[None])[0]), rig)
+    assert off.coverage < 0.6 and off.keypoint_px > 20
+    sheet = contact_sheet([[np.zeros((480, 640, 3), np.uint8)] * 4] * 2, cell_height=120, label_rows=["a", "b"])
+    assert sheet.shape == (240, 4 * 160, 3)
