@@ -16,14 +16,14 @@ ALGORITHMS = (
 )
 
 LIKELIHOODS = (
-    ("silh+edge", "Silhouette + edges", "Binary silhouette overlap and image edges (default)"),
+    ("silh+edge", "Silhouette + edges", "Binary silhouette overlap and image edges (the paper's best)"),
     ("silh+edgech", "Silhouette + chamfer edges", "Binary silhouette overlap and distance to image edges"),
     ("silhch+color", "Chamfer silhouette + colour", "Chamfer silhouette distance and per-part colour "
                                                     "histograms (slowest, best on clothes with distinct colours)"),
     ("silh", "Silhouette", "Binary silhouette overlap only"),
     ("silhch", "Chamfer silhouette", "Chamfer silhouette distance only"),
     ("lsilh+edge+kp", "Learned mask + edges + keypoints",
-     "Silhouette from the learned person mask, image edges and learned 2D body keypoints (robust to "
+     "Silhouette from the learned person mask, image edges and learned 2D body keypoints (default: robust to "
      "changing light, clutter and people in the background)"),
     ("lsilh+edge", "Learned mask + edges", "Silhouette from the learned person mask and image edges"),
     ("silh+edge+kp", "Silhouette + edges + keypoints",
@@ -72,7 +72,7 @@ class MocapSettings(bpy.types.PropertyGroup):
 
     # ---- tracker
     algorithm: EnumProperty(name="Algorithm", items=ALGORITHMS, default="isa")
-    likelihood: EnumProperty(name="Likelihood", items=LIKELIHOODS, default="silh+edge",
+    likelihood: EnumProperty(name="Likelihood", items=LIKELIHOODS, default="lsilh+edge+kp",
                              description="Image cues the pose is scored against")
     particles: IntProperty(name="Particles", default=200, min=1, soft_max=2000,
                            description="Pose hypotheses per iteration (the budget per frame is particles x iterations)")

@@ -47,11 +47,12 @@ def draw_body(image, camera, vertices, faces, face_part, colours, alpha=0.45):
 
 def draw_landmarks(image, uv, visibility, min_visibility=0.5):
     """The learned landmarks the frame was solved with: person's left in green, right in magenta."""
+    radius = max(3, round(max(image.shape[:2]) / 240))  # visible on HD footage too
     for k, (point, vis) in enumerate(zip(uv, visibility)):
         if vis < min_visibility or not np.all(np.isfinite(point)):
             continue
         colour = (0, 255, 0) if k % 2 == 1 else (255, 0, 255) if k > 0 else (255, 255, 255)
-        cv2.circle(image, (int(round(point[0])), int(round(point[1]))), 3, colour, -1, cv2.LINE_AA)
+        cv2.circle(image, (int(round(point[0])), int(round(point[1]))), radius, colour, -1, cv2.LINE_AA)
     return image
 
 

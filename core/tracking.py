@@ -40,7 +40,9 @@ PARTICLE_STATE_ATTRIBUTES = POSE_STATE_ATTRIBUTES[1:]  # what follows the estima
 @dataclass
 class TrackingSettings:
     algorithm: str = "isa"
-    likelihood: str = "silh+edge"
+    # The product's default (README, "Where it stands": best on every sample scene); the paper's likelihoods
+    # stay selectable for the comparison.
+    likelihood: str = "lsilh+edge+kp"
     # The paper's split of its 3000 evaluations per frame. The same budget as 100 x 30 annealed the walk's
     # arms better (plain ISA s+e, compare from the search: 27.2 mm against 30.5 mm over seeds 0-8) and the
     # playground about as well (18.0 against 17.8 mm over seeds 0-8): `--particles 100 --iterations 30`.
@@ -203,6 +205,8 @@ class Tracker:
         expected near, absolute)."""
         images = self.capture.frames.read(frame)
         cams = self.capture.cameras
+        if guide_poses is None:
+            guide_poses = self._guide_poses()
         masks = [None] * len(cams)
         self.evidence = None
         if self.energy.weights.needs_learned_evidence:
@@ -229,12 +233,20 @@ class Tracker:
     def _guide_poses(self):
         """Where the person is expected this frame: the last estimate and its constant-velocity step."""
         last = [self.to_absolute(h) for h in self.history[-2:]]
+        if not last:
+            return self.body.default_pose()[None]  # nothing solved yet: the subject as placed
         if len(last) == 2:
             return np.stack([last[1], 2 * last[1] - last[0]])
         return np.stack(last)
 
-    def _set_frame(self, feats):
+    def load_frame(self, frame, guide_poses=None):
+        """Compute `frame`'s features (and learned evidence, crops around `guide_poses`, by default the
+        prediction from the last estimates) and hand them to the energy model; returns the features."""
+        if guide_poses is None:
+            guide_poses = self._guide_poses()
+        feats = self.features(frame, guide_poses)
         self.energy.set_frame(feats, self.evidence)
+        return feats
 
     @property
     def uses_color(self):
@@ -296,9 +308,8 @@ class Tracker:
         body, s = self.body, self.settings
         rough = body.default_pose() if rough_pose is None else np.asarray(rough_pose, float)
         self.anchor = rotvec_to_matrix(rough[body.root_rotation_dofs])
-        feats = self.features(frame, rough if initial_pose is None else initial_pose)
         self.energy.set_reference_pose(default_pose_at(body, rough))
-        self._set_frame(feats)
+        feats = self.load_frame(frame, rough if initial_pose is None else initial_pose)
         if initial_pose is None:
             from .optimizers.isa import InteractingSimulatedAnnealing
 
@@ -308,8 +319,7 @@ class Tracker:
             fitted = self._keypoint_start(start) if self.evidence is not None else None
             if fitted is not None:  # the landmarks place the body: search closer around it
                 start, half_width, yaw_spread = fitted, KEYPOINT_INIT_TRANSLATION, KEYPOINT_INIT_YAW
-                feats = self.features(frame, fitted)  # crops around the person, not the rough placement
-                self._set_frame(feats)
+                feats = self.load_frame(frame, fitted)  # crops around the person, not the rough placement
             x0 = self.to_relative(start)
             spread = self.space.scale * 4  # joints: 20 degrees around the neutral posture
             tilt, yaw = body.root_rotation_dofs[:2], body.root_rotation_dofs[2]  # rotation vector in world axes, Z up
@@ -365,8 +375,7 @@ class Tracker:
     def track(self, frame):
         """Solve one frame after the initial one."""
         t0 = time.perf_counter()
-        feats = self.features(frame, self._guide_poses())
-        self._set_frame(feats)
+        feats = self.load_frame(frame)
         if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
             self.optimizer.set_frame_problem(self._icp_problem(feats))
         result = self.optimizer.track_frame(self._energy_fn, list(self.history))

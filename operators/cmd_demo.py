@@ -41,8 +41,8 @@ def run(args):
         frames = range(DEMO_FRAMES)
         what = (f"first {DEMO_FRAMES} frames, {DEMO_PARTICLES} particles x {DEMO_ITERATIONS} iterations "
                 f"(a short demo; the paper's budget is 200 x 15: use --full)")
-    print(f"Markerless Mocap demo: tracking sample scene '{args.scene_name}' with ISA (silhouettes + edges)\n"
-          f"  and the local ICP refinement;\n"
+    print(f"Markerless Mocap demo: tracking sample scene '{args.scene_name}' with ISA ({settings.likelihood}: "
+          f"learned person mask,\n  edges and learned keypoints) and the local ICP refinement;\n"
           f"  {what}.", file=sys.stderr)
     t0 = time.perf_counter()
     scene = open_subject(capture / "subject.blend")

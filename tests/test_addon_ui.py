@@ -45,7 +45,7 @@ def test_addon_registers_panels_operators_properties_and_cli(addon_module_name, 
         assert op.poll() is True, cls.bl_idname
     props = bpy.context.scene.mocap
     assert (props.algorithm, props.likelihood, props.particles, props.iterations, props.backend) == (
-        "isa", "silh+edge", 200, 15, "auto")
+        "isa", "lsilh+edge+kp", 200, 15, "auto")
     prefs = bpy.context.preferences.addons[addon_module_name].preferences
     assert type(prefs).bl_idname == addon_module_name and prefs.default_backend == "auto"
     ops_pkg = _module(addon_module_name, "operators")

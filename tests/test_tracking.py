@@ -52,7 +52,7 @@ def test_each_optimiser_lowers_the_energy_of_a_perturbed_pose(walk, algorithm):
         tracker = make_tracker(walk, algorithm=algorithm, particles=40, iterations=6, seed=seed, velocity=False,
                                refine="none")  # the optimiser alone
         tracker.initialise(frame - 1, initial_pose=start)
-        tracker.energy.set_frame(tracker.features(frame))
+        tracker.load_frame(frame)
         before = float(tracker.energy(start[None])[0])
         est = tracker.track(frame)
         assert est.energy < before
@@ -77,8 +77,7 @@ def test_refinement_lowers_the_energy_and_moves_the_particles(walk):
     tracker = make_tracker(walk, particles=20, iterations=2, seed=0)
     tracker.initialise(0, initial_pose=gt[0])
     tracker.track(1)
-    feats = tracker.features(2)
-    tracker.energy.set_frame(feats)
+    feats = tracker.load_frame(2)
     rng = np.random.default_rng(2)
     start = tracker.to_relative(gt[2] + rng.normal(0, 0.7, body.n_dof) * body.scale)
     particles = tracker.optimizer.particles.copy()

@@ -110,9 +110,12 @@ def mask_to_image(prob_crop, box, width, height):
     inverse = cv2.invertAffineTransform(box.image_to_crop_matrix())
     prob = cv2.warpAffine(np.asarray(prob_crop, np.float32), inverse, (width, height), flags=cv2.INTER_LINEAR,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
-    ys, xs = np.mgrid[0:height, 0:width]
-    outside = ~box.contains(np.stack([xs + 0.5, ys + 0.5], axis=-1))
-    prob[outside] = np.nan
+    # Pixels whose centre lies outside the square (the same test as CropBox.contains, per row and column).
+    half = box.size / 2
+    cols = np.abs(np.arange(width) + 0.5 - box.cx) <= half
+    rows = np.abs(np.arange(height) + 0.5 - box.cy) <= half
+    prob[~rows, :] = np.nan
+    prob[:, ~cols] = np.nan
     return prob
 
 
