@@ -1,4 +1,6 @@
 """FrameSource: frame-exact random access in videos and image folders, offsets, cache, errors."""
+import re
+
 import cv2
 import numpy as np
 import pytest
@@ -232,3 +234,51 @@ def test_load_capture_easymocap_sizes_from_videos(tmp_path, clip):
     cap = load_capture(tmp_path / "cap")
     assert [c.size for c in cap.cameras] == [(W, H), (W, H)]
     cap.close()
+
+
+def test_footage_a_few_pixels_off_the_calibration(tmp_path, clip):
+    """Pose2Sim's demo: the calibration says 1088 px wide, two videos are 1080 (the sensor's padded
+    width, same pixel grid). A few pixels at the right or bottom are accepted with one warning line;
+    more than 16 px / 1 % per side, a resize, or a principal point outside the footage are refused."""
+    import warnings
+
+    from markerless_mocap.core.camera import Camera
+    from markerless_mocap.core.capture.capture import CaptureError, fit_camera_to_footage, load_capture
+
+    # cam_2's calibration is 1 px wider and taller than its image folder (160x120; 1 % of 161 is 1.6 px): accepted
+    cams, frames, folder_frames, _ = _tiny_capture(tmp_path / "cap", clip, size_2=(W + 1, H + 1))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cap = load_capture(tmp_path / "cap")
+    try:
+        msgs = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+        assert len(msgs) == 1 and "\n" not in msgs[0]
+        assert re.search(r"camera 'cam_2': the calibration \(calibration\.toml\) says 161x121 but .*cam_2 is 160x120: "
+                         r"1 x 1 px off", msgs[0]), msgs[0]
+        assert cap.camera("cam_2").size == (W, H) and cap.camera("cam_1").size == (W, H)
+        np.testing.assert_array_equal(cap.camera("cam_2").K, cams[1].K)     # same pixel grid, same K
+        np.testing.assert_array_equal(cap.frames.read(3)["cam_2"], folder_frames[3])
+    finally:
+        cap.close()
+
+    K = np.array([[1790.0, 0, 533.0], [0, 1790.0, 948.0], [0, 0, 1]])
+    cam = Camera("cam01", K, [], np.eye(3), [0, 0, 3.0], 1088, 1920)
+    with pytest.warns(UserWarning, match=r"camera 'cam01': .*1088x1920 but .*1080x1920: 8 x 0 px off"):
+        assert fit_camera_to_footage(cam, 1080, 1920, "Calib.qca.txt", "videos/cam01.mp4").size == (1080, 1920)
+    with pytest.warns(UserWarning, match="px off"):       # padded the other way (footage larger)
+        assert fit_camera_to_footage(cam, 1096, 1920).size == (1096, 1920)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert fit_camera_to_footage(cam, 1088, 1920) is cam            # exact size: silent
+    # refused: too far off (17 px > 16 px), over 1 % of a small side, a resize, principal point outside
+    with pytest.raises(CaptureError, match=r"camera 'cam01': the calibration \(Calib\.qca\.txt\) says 1088x1920 but "
+                                           r"videos/cam01\.mp4 is 1071x1920: 17 x 0 px off .*calibrate the cameras at 1071x1920"):
+        fit_camera_to_footage(cam, 1071, 1920, "Calib.qca.txt", "videos/cam01.mp4")
+    small = Camera("c", [[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]], [], np.eye(3), [0, 0, 3.0], 640, 480)
+    with pytest.raises(CaptureError, match="640x480 but its footage is 640x474: 0 x 6 px off"):
+        fit_camera_to_footage(small, 640, 474)                          # 6 rows > 1 % of 480
+    with pytest.raises(CaptureError, match="resized by 0.99375"):
+        fit_camera_to_footage(small, 636, 477)
+    edge = Camera("e", [[500.0, 0, 637.0], [0, 500.0, 239.5], [0, 0, 1]], [], np.eye(3), [0, 0, 3.0], 640, 480)
+    with pytest.raises(CaptureError, match=r"principal point \(637\.0, 239\.5\) falls outside the footage"):
+        fit_camera_to_footage(edge, 636, 480)

@@ -8,6 +8,8 @@ Camera names tie the calibration to the videos.
 """
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,6 +70,45 @@ def _footage_sizes(videos_dir: Path) -> dict:
     return sizes
 
 
+# footage may differ from the calibrated size by this much per side (both limits hold): a sensor whose
+# width is padded to a multiple of 16 (1088 vs 1080), or a few rows cropped by an encoder
+SIZE_TOLERANCE_PX = 16
+SIZE_TOLERANCE_FRACTION = 0.01
+
+
+def fit_camera_to_footage(cam: Camera, w: int, h: int, calib_name: str = "the calibration",
+                          video=None) -> Camera:
+    """The camera for footage of w x h pixels.
+
+    Same size: `cam` itself. A few pixels off (at most SIZE_TOLERANCE_PX and SIZE_TOLERANCE_FRACTION of
+    the side, on each side) while the pixel grid is the same - the footage is the calibrated image
+    cropped or padded at the right or bottom, so K still holds, and the principal point lies inside the
+    footage: the camera with the footage's size, and a one-line warning. Anything else (a resized
+    video, a different camera, a crop at the left or top that moves the principal point out) is a
+    CaptureError naming the camera, both sizes and the fix."""
+    W, H = cam.size
+    if (w, h) == (W, H):
+        return cam
+    what = f"camera '{cam.name}': the calibration ({calib_name}) says {W}x{H} but {video or 'its footage'} is {w}x{h}"
+    dw, dh = w - W, h - H
+    if dw and dh and w * H == h * W:
+        raise CaptureError(f"{what}; the video looks resized by {w / W:g}: resize it back to {W}x{H}, or scale the "
+                           f"calibration (Camera.scaled({w / W:g}))")
+    limit_w = min(SIZE_TOLERANCE_PX, SIZE_TOLERANCE_FRACTION * W)
+    limit_h = min(SIZE_TOLERANCE_PX, SIZE_TOLERANCE_FRACTION * H)
+    if abs(dw) > limit_w or abs(dh) > limit_h:
+        raise CaptureError(f"{what}: {abs(dw)} x {abs(dh)} px off is more than a padded or cropped sensor explains "
+                           f"(at most {SIZE_TOLERANCE_PX} px and {SIZE_TOLERANCE_FRACTION:.0%} per side); use the "
+                           f"footage the calibration was made for, or calibrate the cameras at {w}x{h}")
+    cx, cy = cam.K[0, 2], cam.K[1, 2]
+    if not (0.0 <= cx <= w - 1 and 0.0 <= cy <= h - 1):
+        raise CaptureError(f"{what}, and the principal point ({cx:.1f}, {cy:.1f}) falls outside the footage; "
+                           f"the images do not share the calibration's pixel grid: recalibrate at {w}x{h}")
+    warnings.warn(f"{what}: {abs(dw)} x {abs(dh)} px off, taken as the same pixel grid cropped/padded at the right "
+                  f"or bottom; the camera is used at {w}x{h}", UserWarning, stacklevel=3)
+    return dataclasses.replace(cam, width=int(w), height=int(h))
+
+
 def _load_backgrounds(folder: Path, cameras: list) -> dict | None:
     import cv2
 
@@ -111,15 +152,8 @@ def load_capture(folder, units: str | None = None, offsets: dict | None = None, 
     except FrameSourceError as exc:
         raise CaptureError(f"{folder}: {exc}") from None
     try:
-        for cam in cameras:
-            w, h = frames.image_size(cam.name)
-            if (w, h) != cam.size:
-                hint = ""
-                if w * cam.height == h * cam.width:
-                    hint = (f"; the video looks resized by {w / cam.width:g}: resize it back, or scale the calibration "
-                            f"(Camera.scaled({w / cam.width:g}))")
-                raise CaptureError(f"camera '{cam.name}': the calibration ({calib_path.name}) says "
-                                   f"{cam.width}x{cam.height} but {paths[cam.name]} is {w}x{h}{hint}")
+        cameras = [fit_camera_to_footage(cam, *frames.image_size(cam.name), calib_path.name, paths[cam.name])
+                   for cam in cameras]
         backgrounds = _load_backgrounds(folder, cameras)
     except Exception:
         frames.close()
