@@ -48,6 +48,27 @@ SCENES = {
                            (130, 3.6, 1.35, 500, (-6.0, 2.0), -1.2),
                            (215, 3.7, 1.90, 560, (7.5, 5.0), 1.5),
                            (315, 3.6, 1.45, 510, (-3.5, -5.5), -0.4)]),
+    # the hard scene of issue 13 (not tuned on): see sample_scenes/README.md. Cameras stand on one side of
+    # the subject's path (azimuths relative to the side facing away from the second person), so the second
+    # person walks behind the subject in every view.
+    "busy": dict(bvh="131_01.bvh", start=120, n_frames=80, seed=1313, uncontrolled=True, calibration="toml",
+                 busy=True, noise=7.0, blur=0.7,
+                 cameras=[
+                     (-68, 3.9, 1.50, 520, (5.0, -3.0), 0.6),
+                     (-22, 3.6, 1.75, 545, (-4.5, 6.0), -1.1),
+                     (24, 3.7, 1.40, 505, (2.5, 4.5), 1.3),
+                     (70, 3.9, 1.85, 560, (-7.0, -4.0), -0.5)],
+                 # a second copy of the body: the same clip 12 frames later, walking the other way 1.9 m
+                 # behind the subject's path, in other clothes
+                 second=dict(bvh="131_01.bvh", start=132, offset_m=1.9,
+                             colours={"shirt": (0.28, 0.09, 0.045), "trousers": (0.2, 0.16, 0.09),
+                                      "hair": (0.12, 0.07, 0.03)}),
+                 colours={"shirt": (0.15, 0.15, 0.14), "trousers": (0.055, 0.055, 0.055)},
+                 # arm motion keyed on top of the walk: (first frame, frames in, frames held, frames out, targets)
+                 gestures=[(6, 5, 8, 5, {"Right": "face"}),
+                           (29, 6, 10, 5, {"Left": "cross", "Right": "cross_front"}),
+                           (53, 5, 6, 4, {"Left": "face", "Right": "belly"}),
+                           (70, 3, 2, 4, {"Right": "cross"})]),
 }
 MASK_FRAMES = 5
 
@@ -138,6 +159,123 @@ def key_motion(arm, res, names):
                 pb.keyframe_insert("location", frame=f + 1)
 
 
+def forward_kinematics(basis, root_loc, rest, parents):
+    """Armature-space pose matrices from matrix_basis rotations (F, B, 3, 3) and the root's location,
+    as Blender (and core.mocap.retarget) compose them."""
+    F, B = basis.shape[:2]
+    b4 = np.zeros((F, B, 4, 4))
+    b4[..., :3, :3] = basis
+    b4[..., 3, 3] = 1.0
+    root = int(np.nonzero(np.asarray(parents) < 0)[0][0])
+    b4[:, root, :3, 3] = root_loc
+    pose = np.empty_like(b4)
+    inv_rest = np.linalg.inv(rest)
+    for b in range(B):
+        p = parents[b]
+        pose[:, b] = rest[b] @ b4[:, b] if p < 0 else pose[:, p] @ (inv_rest[p] @ rest[b]) @ b4[:, b]
+    return pose
+
+
+def _rotation_between(a, b):
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    v, c = np.cross(a, b), float(a @ b)
+    if np.linalg.norm(v) < 1e-9:
+        return np.eye(3)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K / (1 + c)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def gesture_weights(gestures, F):
+    """Per gesture, a smooth 0..1 weight per frame (smoothstep in, hold, smoothstep out)."""
+    out = []
+    for start, t_in, hold, t_out, targets in gestures:
+        w = np.zeros(F)
+        for f in range(F):
+            x = f - start
+            if 0 <= x < t_in:
+                u = (x + 1) / t_in
+            elif t_in <= x < t_in + hold:
+                u = 1.0
+            elif t_in + hold <= x < t_in + hold + t_out:
+                u = 1.0 - (x - t_in - hold + 1) / (t_out + 1)
+            else:
+                u = 0.0
+            w[f] = u * u * (3 - 2 * u)
+        out.append((w, targets))
+    return out
+
+
+def add_arm_gestures(res, names, parents, rest, gestures):
+    """Key hand-to-face and arms-crossed motion on top of the retargeted clip: per frame, each arm's
+    wrist is moved (along a path bulging forward, so it does not go through the body) towards a target
+    in the body's frame, and the shoulder and elbow are turned by two-bone IK. Changes res in place."""
+    F = res.basis_rotations.shape[0]
+    idx = {n: k for k, n in enumerate(names)}
+    basis = res.basis_rotations.copy()
+    pose = forward_kinematics(basis, res.root_location, rest, parents)
+    for w, targets in gesture_weights(gestures, F):
+        for f in np.nonzero(w > 0)[0]:
+            for side, kind in targets.items():
+                other = "Left" if side == "Right" else "Right"
+                P = pose[f, :, :3, 3]
+                hips, neck, head = P[idx["Hips"]], P[idx["Neck"]], P[idx["Head"]]
+                up = _unit(neck - hips)
+                lat = P[idx["LeftArm"]] - P[idx["RightArm"]]            # towards the person's left
+                lat = _unit(lat - (lat @ up) * up)
+                fwd = np.cross(lat, up)                                  # left x up = forward (Z up, right-handed)
+                side_dir = lat if side == "Left" else -lat
+                chest = hips + 0.62 * (neck - hips)
+                if kind == "face":
+                    T = head - 0.03 * up + 0.13 * fwd + 0.03 * side_dir
+                    pole = -up + 0.6 * side_dir - 0.2 * fwd
+                elif kind == "cross":
+                    T = chest - 0.13 * side_dir + 0.17 * fwd
+                    pole = side_dir - 0.5 * up
+                elif kind == "cross_front":
+                    T = chest - 0.05 * up - 0.14 * side_dir + 0.25 * fwd
+                    pole = side_dir - 0.4 * up
+                else:   # "belly": the hand across the front of the belly, to the other side
+                    T = hips + 0.3 * (neck - hips) - 0.1 * side_dir + 0.2 * fwd
+                    pole = side_dir - 0.8 * up
+                a_up, a_fore, a_hand = idx[f"{side}Arm"], idx[f"{side}ForeArm"], idx[f"{side}Hand"]
+                S, E, Wr = P[a_up], P[a_fore], P[a_hand]
+                # path: from the walk's wrist to the target, bulging 12 cm forward on the way
+                T = (1 - w[f]) * Wr + w[f] * T + 0.12 * math.sin(math.pi * w[f]) * fwd
+                l1, l2 = np.linalg.norm(E - S), np.linalg.norm(Wr - E)
+                d = min(np.linalg.norm(T - S), 0.98 * (l1 + l2))
+                d = max(d, abs(l1 - l2) + 1e-3)
+                u = _unit(T - S)
+                a = (l1 * l1 + d * d - l2 * l2) / (2 * d)
+                h = math.sqrt(max(l1 * l1 - a * a, 0.0))
+                # the elbow turns from where the walk has it to the gesture's pole as the weight rises
+                pole = _unit(pole - (pole @ u) * u)
+                now = (E - S) - ((E - S) @ u) * u
+                if np.linalg.norm(now) > 1e-6:
+                    pole = (1 - w[f]) * _unit(now) + w[f] * pole
+                    pole = pole - (pole @ u) * u
+                E_new = S + a * u + h * _unit(pole)
+                T = S + d * u
+                # upper arm: shoulder -> new elbow; then forearm: elbow -> target wrist (world rotations)
+                for b, end in ((a_up, None), (a_fore, T)):
+                    P2 = pose[f, :, :3, 3]
+                    if end is None:
+                        R = _rotation_between(E - S, E_new - S)
+                    else:
+                        R = _rotation_between(P2[a_hand] - P2[a_fore], end - P2[a_fore])
+                    O_new = R @ pose[f, b, :3, :3]
+                    p = parents[b]
+                    basis[f, b] = rest[b, :3, :3].T @ rest[p, :3, :3] @ pose[f, p, :3, :3].T @ O_new
+                    pose[f:f + 1] = forward_kinematics(basis[f:f + 1], res.root_location[f:f + 1], rest, parents)
+    res.basis_rotations = basis
+    res.pose_matrices = pose
+    return res
+
+
 def evaluated_joints_and_floor(arm, body, names, F):
     """Bone heads in world (from Blender's evaluated pose) and the lowest mesh point, per frame."""
     scene = bpy.context.scene
@@ -174,6 +312,79 @@ def retarget_scene(cfg, data_dir, arm, F):
     shift = -(root_xy.min(axis=0) + root_xy.max(axis=0)) / 2
     res = retarget(clip, rest, parents, names, target_tails=tails, translation=(shift[0], shift[1], 0.0))
     return clip, res, names, parents, rest, tails, shift
+
+
+def add_second_person(spec, data, data_dir, F, centre, d, n):
+    """A second copy of the body in other clothes, driven by `spec`'s clip, walking along the subject's
+    path direction reversed, `offset_m` behind it (+n side). Returns its joints (F, B, 3) and a record."""
+    from mathutils import Matrix
+    arm2, body2 = subject.build_subject(bpy, data, colours=spec.get("colours"))
+    arm2.name, body2.name = "Person2", "Person2Body"
+    clip2, res2, names, parents, rest, tails, _ = retarget_scene(dict(bvh=spec["bvh"], start=spec["start"]),
+                                                                 data_dir, arm2, F)
+    key_motion(arm2, res2, names)
+    _, low2 = evaluated_joints_and_floor(arm2, body2, names, F)
+    h2 = res2.pose_matrices[:, names.index("Hips"), :2, 3]
+    d2 = _unit(h2[-1] - h2[0])
+    ang = math.atan2(-d[1], -d[0]) - math.atan2(d2[1], d2[0])
+    c, s_ = math.cos(ang), math.sin(ang)
+    G = np.eye(4)
+    G[:2, :2] = [[c, -s_], [s_, c]]
+    mid2 = G[:2, :2] @ ((h2.min(axis=0) + h2.max(axis=0)) / 2)
+    G[:2, 3] = np.asarray(centre) + spec["offset_m"] * np.asarray(n) - mid2
+    G[2, 3] = -float(np.median(low2))
+    arm2.matrix_world = Matrix(G.tolist())
+    P2, low2 = evaluated_joints_and_floor(arm2, body2, names, F)
+    return P2, dict(source=f"{spec['bvh']} frames {spec['start']}..{spec['start'] + F - 1} at {FPS} fps",
+                    offset_behind_path_m=spec["offset_m"], armature_matrix_world=G.tolist(),
+                    clothing_colours_linear_rgb=spec.get("colours"),
+                    lowest_point_m=[float(low2.min()), float(low2.max())])
+
+
+def second_person_visibility(cams, P, P2):
+    """Per camera: the fraction of frames in which at least half of the second person's joints project
+    inside the image, and the frames where its hips project inside the subject's joint box while
+    further away (it passes behind the subject)."""
+    out = {}
+    for cam in cams:
+        uv2, z2 = cam.project_with_depth(P2.reshape(-1, 3))
+        uv2, z2 = uv2.reshape(P2.shape[0], -1, 2), z2.reshape(P2.shape[0], -1)
+        inside = (uv2[..., 0] >= 0) & (uv2[..., 0] < cam.width) & (uv2[..., 1] >= 0) & (uv2[..., 1] < cam.height) & (z2 > 0)
+        uv1, z1 = cam.project_with_depth(P.reshape(-1, 3))
+        uv1, z1 = uv1.reshape(P.shape[0], -1, 2), z1.reshape(P.shape[0], -1)
+        hip = 0   # Hips is the root, first in the rig's order
+        lo, hi = uv1.min(axis=1), uv1.max(axis=1)
+        behind = ((uv2[:, hip] >= lo) & (uv2[:, hip] <= hi)).all(axis=1) & (z2[:, hip] > z1[:, hip])
+        out[cam.name] = dict(in_view_fraction=float((inside.mean(axis=1) >= 0.5).mean()),
+                             behind_subject_frames=int(behind.sum()),
+                             depth_m=[float(z2[:, hip].min()), float(z2[:, hip].max())])
+    return out
+
+
+def hand_statistics(P, names, face_m=0.15):
+    """How often a hand (wrist joint) is at the face (within face_m of the head joint) or in front
+    of the torso past the body's midline (crossing it), from the ground-truth joints."""
+    idx = {n: k for k, n in enumerate(names)}
+    hips, neck = P[:, idx["Hips"]], P[:, idx["Neck"]]
+    up = neck - hips
+    up /= np.linalg.norm(up, axis=1, keepdims=True)
+    lat = P[:, idx["LeftArm"]] - P[:, idx["RightArm"]]
+    lat -= (lat * up).sum(axis=1, keepdims=True) * up
+    lat /= np.linalg.norm(lat, axis=1, keepdims=True)
+    fwd = np.cross(lat, up)
+    out = {}
+    for side, sign in (("Left", 1.0), ("Right", -1.0)):
+        h = P[:, idx[f"{side}Hand"]]
+        rel = h - hips
+        at_face = np.linalg.norm(h - P[:, idx["Head"]], axis=1) < face_m
+        height = (rel * up).sum(axis=1)
+        crossing = (sign * (rel * lat).sum(axis=1) < 0) & ((rel * fwd).sum(axis=1) > 0.05) & \
+            (height > -0.05) & (height < np.linalg.norm(neck - hips, axis=1))
+        out[f"{side.lower()}_hand_at_face_frames"] = int(at_face.sum())
+        out[f"{side.lower()}_hand_across_torso_frames"] = int(crossing.sum())
+    speed = np.linalg.norm(np.diff(P[:, [idx["LeftHand"], idx["RightHand"]]], axis=0), axis=2) * FPS
+    out["max_hand_speed_m_per_s"] = float(speed.max())
+    return out
 
 
 # ---------------------------------------------------------------- rendering
@@ -294,24 +505,29 @@ def render_masks(cam_objs, body, out_dir, frames):
 
 
 # ---------------------------------------------------------------- subject.blend
-def save_subject_blend(data, path, hips_world0, yaw0, rng):
-    """Armature + mesh in rest pose, placed where the person starts with a seeded error."""
+def save_subject_blend(data, path, hips_world0, yaw0, rng, colours=None, offset=None, dyaw=None, fps=FPS,
+                       floor_z=0.0):
+    """Armature + mesh in rest pose, placed where the person starts with a seeded error
+    (or with the given horizontal offset in metres and yaw error in radians), soles at floor_z."""
     from mathutils import Matrix
     bpy.ops.wm.read_homefile(use_empty=True)
-    arm, body = subject.build_subject(bpy, data)
-    ang = rng.uniform(0, 2 * np.pi)
-    offset = 0.10 * np.array([math.cos(ang), math.sin(ang)])
-    dyaw = math.radians(15.0) * (1 if rng.uniform() < 0.5 else -1)
+    arm, body = subject.build_subject(bpy, data, colours=colours)
+    if offset is None:
+        ang = rng.uniform(0, 2 * np.pi)
+        offset = 0.10 * np.array([math.cos(ang), math.sin(ang)])
+    offset = np.asarray(offset, float)
+    if dyaw is None:
+        dyaw = math.radians(15.0) * (1 if rng.uniform() < 0.5 else -1)
     yaw = yaw0 + dyaw
     hips_rest = np.array(arm.data.bones["Hips"].head_local)
     c, s = math.cos(yaw), math.sin(yaw)
     Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
     M = np.eye(4)
     M[:3, :3] = Rz
-    target = np.array([hips_world0[0] + offset[0], hips_world0[1] + offset[1], hips_rest[2]])
+    target = np.array([hips_world0[0] + offset[0], hips_world0[1] + offset[1], hips_rest[2] + floor_z])
     M[:3, 3] = target - Rz @ hips_rest
     arm.matrix_world = Matrix(M.tolist())
-    bpy.context.scene.render.fps = FPS
+    bpy.context.scene.render.fps = int(round(fps))
     path.parent.mkdir(parents=True, exist_ok=True)
     bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True)
     return dict(offset_m=offset.tolist(), offset_norm_m=float(np.linalg.norm(offset)),
@@ -331,8 +547,10 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     data = subject.load_subject_data(data_dir)
-    arm, body = subject.build_subject(bpy, data)
+    arm, body = subject.build_subject(bpy, data, colours=cfg.get("colours"))
     clip, res, names, parents, rest, tails, shift = retarget_scene(cfg, data_dir, arm, F)
+    if cfg.get("gestures"):
+        add_arm_gestures(res, names, parents, rest, cfg["gestures"])
     key_motion(arm, res, names)
     scene.frame_start, scene.frame_end = 1, F
     P, low = evaluated_joints_and_floor(arm, body, names, F)
@@ -352,16 +570,30 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     # where the person is, for cameras and subject.blend
     hips = P[:, rootb]
     centre = (hips[:, :2].min(axis=0) + hips[:, :2].max(axis=0)) / 2
-    cams = make_cameras(cfg["cameras"], centre)
+    cam_spec = cfg["cameras"]
+    second_info = None
+    if cfg.get("second"):
+        # cameras on the side of the path away from the second person (azimuths relative to that side)
+        d = _unit(hips[-1, :2] - hips[0, :2])
+        n = np.array([-d[1], d[0]])
+        az0 = math.degrees(math.atan2(-n[1], -n[0]))
+        cam_spec = [(az0 + az, *rest_) for az, *rest_ in cam_spec]
+        P2, second_info = add_second_person(cfg["second"], data, data_dir, F, centre, d, n)
+    cams = make_cameras(cam_spec, centre)
     for cam in cams:
         uv, depth = cam.project_with_depth(P.reshape(-1, 3))
         inside = (uv[:, 0] > 8) & (uv[:, 0] < W - 9) & (uv[:, 1] > 8) & (uv[:, 1] < H - 9) & (depth > 0)
         if not inside.all():
             raise RuntimeError(f"[{name}] {cam.name}: {np.count_nonzero(~inside)} joint projections leave the image")
+    if second_info is not None:
+        second_info["views"] = second_person_visibility(cams, P, P2)
+        log(f"[{name}] second person: " + "; ".join(
+            f"{k}: in view {v['in_view_fraction']:.2f}, behind the subject {v['behind_subject_frames']} frames"
+            for k, v in second_info["views"].items()))
 
-    moving = stage.build_room(bpy, rng, cfg["uncontrolled"])
+    moving = stage.build_room(bpy, rng, cfg["uncontrolled"], grey=cfg.get("busy", False))
     stage.animate_moving(bpy, moving, F)
-    stage.build_lights(bpy, cfg["uncontrolled"], F)
+    stage.build_lights(bpy, cfg["uncontrolled"], F, busy=cfg.get("busy", False))
     cam_objs = []
     records = []
     if quick:   # quarter size, with the calibration scaled to match
@@ -399,6 +631,7 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
             log(f"[{name}] rendering {len(cams)} cameras x {F} frames, {samples} samples")
             render_views(cam_objs, tmp / "frames", list(range(F)))
             noise, blur = (4.0, 0.7) if cfg["uncontrolled"] else (1.5, 0.0)
+            noise, blur = cfg.get("noise", noise), cfg.get("blur", blur)
             (out / "videos").mkdir(exist_ok=True)
             for k, ob in enumerate(cam_objs):
                 encode_video(tmp / "frames" / ob.name, out / "videos" / f"{ob.name}.mp4",
@@ -426,12 +659,23 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     O = res.pose_matrices[0, rootb, :3, :3] @ rest[rootb, :3, :3].T   # root rotation from rest
     fwd = O @ np.array([0.0, -1.0, 0.0])                             # the rest pose faces -Y
     yaw0 = math.atan2(fwd[1], fwd[0]) - math.atan2(-1.0, 0.0)
-    placement = save_subject_blend(data, out / "subject.blend", hips[0], yaw0, rng)
+    placement = save_subject_blend(data, out / "subject.blend", hips[0], yaw0, rng, colours=cfg.get("colours"))
     info = dict(scene=name, source=cfg["bvh"], first_source_frame_30fps=cfg["start"], n_frames=F, fps=FPS,
                 cameras=[c.name for c in cams], mask_frames=mask_frames, samples=samples, quick=quick,
                 floor_shift_m=dz, trajectory_shift_m=np.asarray(shift).tolist(), root_scale=res.root_scale,
                 first_frame_hips=hips[0].tolist(), first_frame_yaw_deg=math.degrees(yaw0),
                 subject_placement=placement)
+    if cfg.get("gestures"):
+        info["arm_overlay"] = dict(
+            note="arm motion keyed on top of the retargeted clip (two-bone IK towards targets in the body's "
+                 "frame, blended in and out with smoothstep weights); the ground truth is Blender's evaluated pose",
+            gestures=[dict(first_frame=g[0], frames_in=g[1], frames_held=g[2], frames_out=g[3], targets=g[4])
+                      for g in cfg["gestures"]],
+            **hand_statistics(P, names))
+    if second_info is not None:
+        info["second_person"] = second_info
+    if cfg.get("colours"):
+        info["clothing_colours_linear_rgb"] = cfg["colours"]
     (out / "scene_info.json").write_text(json.dumps(info, indent=1))
     log(f"[{name}] done -> {out}")
 
@@ -440,7 +684,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=str(REPO.parent / "shared" / "data"),
                     help="folder with cmu/ and makehuman/ (default: ../shared/data next to the repository)")
-    ap.add_argument("--scene", default="all", choices=["walk", "playground", "all"])
+    ap.add_argument("--scene", default="all", choices=[*SCENES, "all"])
     ap.add_argument("--out", default=str(HERE), help="where the scene folders go (default: sample_scenes/)")
     ap.add_argument("--samples", type=int, default=4, help="Cycles samples per pixel (denoised)")
     ap.add_argument("--quick", action="store_true", help="8 frames at quarter resolution: a smoke test")

@@ -82,9 +82,13 @@ def box(bpy, name, centre, size, mat, rot_z=0.0):
     return ob
 
 
-def build_room(bpy, rng, uncontrolled):
-    """Floor, four walls, furniture, posters. Returns the objects that move (may be empty)."""
-    floor_mat = planks(bpy, "floor_planks", (0.32, 0.19, 0.09), (0.22, 0.12, 0.05))
+def build_room(bpy, rng, uncontrolled, grey=False):
+    """Floor, four walls, furniture, posters. Returns the objects that move (may be empty).
+    grey: the busy scene's room - grey walls and a grey floor, close to the subject's grey clothes."""
+    if grey:
+        floor_mat = planks(bpy, "floor_planks", (0.075, 0.075, 0.07), (0.05, 0.05, 0.048))
+    else:
+        floor_mat = planks(bpy, "floor_planks", (0.32, 0.19, 0.09), (0.22, 0.12, 0.05))
     bpy.ops.mesh.primitive_plane_add(size=14.0, location=(0, 0, 0))
     floor = bpy.context.active_object
     floor.name = "Floor"
@@ -100,7 +104,11 @@ def build_room(bpy, rng, uncontrolled):
 
     wall_cols = [((0.55, 0.5, 0.42), (0.45, 0.42, 0.36)), ((0.35, 0.45, 0.38), (0.28, 0.36, 0.3)),
                  ((0.6, 0.56, 0.5), (0.5, 0.47, 0.42)), ((0.42, 0.36, 0.3), (0.34, 0.29, 0.24))]
-    if uncontrolled:
+    if grey:
+        # every wall a mottled grey around the shirt's grey (and one darker, near the trousers)
+        wall_cols = [((0.17, 0.17, 0.16), (0.12, 0.12, 0.115)), ((0.15, 0.155, 0.16), (0.11, 0.11, 0.115)),
+                     ((0.19, 0.185, 0.17), (0.13, 0.13, 0.12)), ((0.06, 0.06, 0.06), (0.04, 0.04, 0.042))]
+    elif uncontrolled:
         # one wall the colour of the shirt: the silhouette is hard to cut out against it
         wall_cols[1] = ((0.09, 0.14, 0.22), (0.07, 0.11, 0.18))
     half = 5.5
@@ -180,7 +188,7 @@ def build_room(bpy, rng, uncontrolled):
     return moving
 
 
-def build_lights(bpy, uncontrolled, n_frames):
+def build_lights(bpy, uncontrolled, n_frames, busy=False):
     scene = bpy.context.scene
     world = bpy.data.worlds.new("World")
     scene.world = world
@@ -204,7 +212,9 @@ def build_lights(bpy, uncontrolled, n_frames):
         ob.location = (x, y, 2.95)
         scene.collection.objects.link(ob)
         areas.append(ad)
-    if uncontrolled:
+    if busy:
+        _busy_lights(bpy, sun, sun_data, areas, bg, n_frames)
+    elif uncontrolled:
         # illumination drifts over the clip (clouds / a dimmer): strength and colour keyed
         keys = np.linspace(1, n_frames, 5)
         # all sources follow one envelope (a cloud passing, a dimmer): the mean image brightness
@@ -233,6 +243,45 @@ def build_lights(bpy, uncontrolled, n_frames):
                 ad.keyframe_insert("color", frame=float(f))
             pl.energy = 150.0 * e
             pl.keyframe_insert("energy", frame=float(f))
+
+
+def _busy_lights(bpy, sun, sun_data, areas, bg, n_frames):
+    """The busy scene: every source on one fast dimmer (about 8x between the darkest and the brightest
+    key) that swings between warm tungsten and cool daylight, a low sun that sweeps round the room
+    (its shadows move across the floor and the walls), and the swinging lamp on the same dimmer."""
+    scene = bpy.context.scene
+    keys = np.linspace(1, n_frames, 8)
+    envelope = [1.0, 0.16, 0.85, 0.13, 1.1, 0.3, 0.95, 0.2]
+    warm, cool = (1.0, 0.68, 0.42), (0.6, 0.76, 1.0)
+    tints = [warm, cool, cool, warm, cool, warm, warm, cool]
+    sun_data.angle = math.radians(3)
+    pl = bpy.data.lights.new("LampLight", "POINT")
+    pl.color = (1.0, 0.8, 0.5)
+    lamp = bpy.data.objects.new("LampLight", pl)
+    scene.collection.objects.link(lamp)
+    lamp.parent = bpy.data.objects["LampPivot"]
+    lamp.location = (0, 0, -1.35)
+    for k, (f, e, c) in enumerate(zip(keys, envelope, tints)):
+        sun_data.energy = 4.0 * e
+        sun_data.color = c
+        sun_data.keyframe_insert("energy", frame=float(f))
+        sun_data.keyframe_insert("color", frame=float(f))
+        bg.inputs["Strength"].default_value = 0.3 * e
+        bg.inputs["Color"].default_value = (*c, 1)
+        bg.inputs["Strength"].keyframe_insert("default_value", frame=float(f))
+        bg.inputs["Color"].keyframe_insert("default_value", frame=float(f))
+        for ad in areas:
+            ad.energy = 400.0 * e
+            ad.color = c
+            ad.keyframe_insert("energy", frame=float(f))
+            ad.keyframe_insert("color", frame=float(f))
+        pl.energy = 200.0 * e
+        pl.keyframe_insert("energy", frame=float(f))
+    # the sun sweeps 150 degrees round the room at a low elevation: long shadows that move
+    for f in np.linspace(1, n_frames, 6):
+        a = (f - 1) / max(n_frames - 1, 1)
+        sun.rotation_euler = (math.radians(58 - 10 * math.sin(math.pi * a)), 0.0, math.radians(-60 + 150 * a))
+        sun.keyframe_insert("rotation_euler", frame=float(f))
 
 
 def animate_moving(bpy, moving, n_frames):

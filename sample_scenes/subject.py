@@ -141,8 +141,10 @@ def make_material(bpy, name, rgb, roughness=0.7, noise=0.0):
     return mat
 
 
-def build_subject(bpy, data, target_tris=5500):
-    """Armature 'Armature' + mesh 'Body' (decimated, weighted, clothed) in rest pose at the origin."""
+def build_subject(bpy, data, target_tris=5500, colours=None):
+    """Armature 'Armature' + mesh 'Body' (decimated, weighted, clothed) in rest pose at the origin.
+    colours: {region: linear RGB} overriding COLOURS (the busy scene's grey clothes, its second person)."""
+    colours = {**COLOURS, **(colours or {})}
     scene = bpy.context.scene
     arm_data = bpy.data.armatures.new("Armature")
     arm = bpy.data.objects.new("Armature", arm_data)
@@ -172,7 +174,7 @@ def build_subject(bpy, data, target_tris=5500):
     scene.collection.objects.link(body)
     mats = {}
     for r in MATERIAL_ORDER:
-        mats[r] = make_material(bpy, f"mocap_{r}", COLOURS[r], roughness=0.55 if r == "skin" else 0.8,
+        mats[r] = make_material(bpy, f"mocap_{r}", colours[r], roughness=0.55 if r == "skin" else 0.8,
                                 noise=0.25 if r in ("shirt", "trousers") else 0.0)
         mesh.materials.append(mats[r])
     regions = face_regions(data)

@@ -253,7 +253,8 @@ def test_footage_a_few_pixels_off_the_calibration(tmp_path, clip):
     try:
         msgs = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
         assert len(msgs) == 1 and "\n" not in msgs[0]
-        assert re.search(r"camera 'cam_2': the calibration \(calibration\.toml\) says 161x121 but .*cam_2 is 160x120: "
+        assert [w.filename for w in caught] == [str(tmp_path / "cap" / "videos" / "cam_2")] and caught[0].line is None
+        assert re.search(r"camera 'cam_2': the calibration \(calibration\.toml\) says 161x121 but the footage is 160x120: "
                          r"1 x 1 px off", msgs[0]), msgs[0]
         assert cap.camera("cam_2").size == (W, H) and cap.camera("cam_1").size == (W, H)
         np.testing.assert_array_equal(cap.camera("cam_2").K, cams[1].K)     # same pixel grid, same K

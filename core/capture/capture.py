@@ -104,8 +104,11 @@ def fit_camera_to_footage(cam: Camera, w: int, h: int, calib_name: str = "the ca
     if not (0.0 <= cx <= w - 1 and 0.0 <= cy <= h - 1):
         raise CaptureError(f"{what}, and the principal point ({cx:.1f}, {cy:.1f}) falls outside the footage; "
                            f"the images do not share the calibration's pixel grid: recalibrate at {w}x{h}")
-    warnings.warn(f"{what}: {abs(dw)} x {abs(dh)} px off, taken as the same pixel grid cropped/padded at the right "
-                  f"or bottom; the camera is used at {w}x{h}", UserWarning, stacklevel=3)
+    # warn_explicit with no source line: Python prints exactly one line (<video>:0: UserWarning: message)
+    warnings.warn_explicit(f"camera '{cam.name}': the calibration ({calib_name}) says {W}x{H} but the footage is "
+                           f"{w}x{h}: {abs(dw)} x {abs(dh)} px off, taken as the same pixel grid cropped/padded at "
+                           f"the right or bottom; the camera is used at {w}x{h}", UserWarning,
+                           str(video or calib_name), 0, module=__name__)
     return dataclasses.replace(cam, width=int(w), height=int(h))
 
 
