@@ -13,7 +13,8 @@ from scipy.optimize import least_squares
 
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
 
-MIN_WEIGHT = 0.5        # a landmark takes part in triangulation above this visibility
+MIN_WEIGHT = 0.2        # a landmark takes part in triangulation above this weight (every found view: see
+                        # keypoints.VISIBILITY_FLOOR)
 TORSO_LANDMARKS = (11, 12, 23, 24)
 
 
@@ -93,30 +94,44 @@ def align_root(body, rig_points, x, targets, ok):
     return out
 
 
-def fit_to_points(body, rig_points, x0, targets, ok, hold=0.02):
-    """Least squares of the rig's landmark points onto `targets` (K,3) where ok, within the limits."""
+def fit_to_points(body, rig_points, x0, targets, ok, hold=0.02, dofs=None, max_nfev=60):
+    """Least squares of the rig's landmark points onto `targets` (K,3) where ok, within the limits, over
+    every DOF or only `dofs` (the others held at x0)."""
     idx = np.nonzero(ok)[0]
-    joint_dofs = np.setdiff1d(np.arange(body.n_dof), np.concatenate([body.translation_dofs,
-                                                                      body.root_rotation_dofs]))
+    x0 = np.asarray(x0, dtype=np.float64)
+    free = np.arange(body.n_dof) if dofs is None else np.asarray(dofs)
+    held_root = np.concatenate([body.translation_dofs, body.root_rotation_dofs])
+    pulled = np.setdiff1d(free, held_root)  # joint angles the landmarks may not see stay near x0
 
-    def residuals(x):
+    def pose(z):
+        x = x0.copy()
+        x[free] = z
+        return x
+
+    def residuals(z):
+        x = pose(z)
         pts = rig_points.world(body, x[None])[0][idx]
-        return np.concatenate([(pts - targets[idx]).ravel(), hold * (x[joint_dofs] - x0[joint_dofs])])
+        return np.concatenate([(pts - targets[idx]).ravel(), hold * (x[pulled] - x0[pulled])])
 
-    lo, hi = body.lower.copy(), body.upper.copy()
-    x_start = np.clip(x0, lo + 1e-9, hi - 1e-9)
-    result = least_squares(residuals, x_start, bounds=(lo, hi), loss="soft_l1", f_scale=0.05, max_nfev=60,
+    lo, hi = body.lower[free], body.upper[free]
+    z0 = np.clip(x0[free], lo + 1e-9, hi - 1e-9)
+    result = least_squares(residuals, z0, bounds=(lo, hi), loss="soft_l1", f_scale=0.05, max_nfev=max_nfev,
                            x_scale="jac")
     rms = float(np.sqrt(np.mean(np.square(result.fun[:3 * len(idx)])))) if len(idx) else np.inf
-    return result.x, rms
+    return pose(result.x), rms
+
+
+def triangulated_landmarks(cameras, targets, rig_points):
+    """The frame's landmarks in 3D: (K,3) points and (K,) ok, left/right swaps resolved per view."""
+    uv, weight = resolve_swaps(cameras, targets.uv, targets.weight, rig_points.swap)
+    return triangulate(cameras, uv, weight)
 
 
 def pose_from_keypoints(body, cameras, targets, rig_points, x_start):
     """A pose for the frame's KeypointTargets: swaps resolved, triangulated, root aligned, then fitted.
     Returns (pose, number of triangulated points, rms residual in metres); the pose is `x_start`
     unchanged when too few landmarks triangulate."""
-    uv, weight = resolve_swaps(cameras, targets.uv, targets.weight, rig_points.swap)
-    X, ok = triangulate(cameras, uv, weight)
+    X, ok = triangulated_landmarks(cameras, targets, rig_points)
     if ok.sum() < 6:
         return np.array(x_start, float), int(ok.sum()), np.inf
     x = align_root(body, rig_points, np.array(x_start, float), X, ok)

@@ -156,6 +156,7 @@ class Tracker:
         self.keypoint_fit = None
         self.limb_off_frames = {}  # limb -> frames in a row its keypoints disagreed
         self.recoveries = []
+        self.proposals = []
         self.history = []  # relative poses of the solved frames (most recent last)
         self.estimates = []
 
@@ -394,13 +395,48 @@ class Tracker:
         self._reanchor(self.history[-1])
         return est
 
-    def _recover_limbs(self, feats, estimate, energy, evaluations, frame):
-        """Search again, each on its own, the limbs whose keypoints have disagreed for RECOVERY_FRAMES frames."""
+    def _keypoint_proposal(self, feats, estimate, energy, evaluations, off):
+        """The limbs whose landmarks disagree with the estimate this frame, fitted to the triangulated
+        landmarks and polished by the local fit: kept when that lowers the energy (fast limbs outrun the
+        particles' prediction; the detections do not)."""
+        from .keypoint_fit import fit_to_points, triangulated_landmarks
+
+        limbs = limb_dofs(self.body.dofs)
+        off_limbs = [limb for limb, distance in off.items() if distance > RECOVERY_DISTANCE and limb in limbs]
+        if not off_limbs:
+            return estimate, energy, evaluations
+        X, ok = triangulated_landmarks(self.capture.cameras, self.energy.keypoints, self.energy.rig_points)
+        if ok.sum() < 6:
+            return estimate, energy, evaluations
+        dofs = np.concatenate([limbs[limb] for limb in off_limbs])
+        fitted, _ = fit_to_points(self.body, self.energy.rig_points, self.to_absolute(estimate), X, ok, dofs=dofs,
+                                  max_nfev=30)
+        candidate = self.to_relative(fitted)
+        if self.refines:
+            candidate = self._icp_fit(feats, candidate)
+        candidate_energy = float(self._energy_fn(candidate[None])[0])
+        evaluations += 1
+        if candidate_energy < energy:
+            step = candidate - estimate
+            self._map_pose_state(lambda poses: self.space.clamp(poses + step), PARTICLE_STATE_ATTRIBUTES)
+            self.proposals.append({"limbs": off_limbs, "kept": True})
+            return candidate, candidate_energy, evaluations
+        self.proposals.append({"limbs": off_limbs, "kept": False})
+        return estimate, energy, evaluations
+
+    def _limbs_off(self, estimate):
         from .keypoints import limb_disagreement
 
         pose = self.to_absolute(estimate)
-        off = limb_disagreement(self.energy.project_rig_points(pose[None])[0], self.energy.keypoints,
-                                self.energy.rig_points)
+        return limb_disagreement(self.energy.project_rig_points(pose[None])[0], self.energy.keypoints,
+                                 self.energy.rig_points)
+
+    def _recover_limbs(self, feats, estimate, energy, evaluations, frame):
+        """First the limbs' keypoint proposal; then search again, each on its own, the limbs whose keypoints
+        have disagreed for RECOVERY_FRAMES frames."""
+        estimate, energy, evaluations = self._keypoint_proposal(feats, estimate, energy, evaluations,
+                                                                self._limbs_off(estimate))
+        off = self._limbs_off(estimate)
         for limb, distance in off.items():
             self.limb_off_frames[limb] = self.limb_off_frames.get(limb, 0) + 1 if distance > RECOVERY_DISTANCE else 0
         lost = {limb: idx for limb, idx in limb_dofs(self.body.dofs).items()

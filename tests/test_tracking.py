@@ -209,3 +209,27 @@ def test_compare_from_truth_needs_every_bone(tmp_path):
     with pytest.raises(SystemExit, match="no positions for the bones"):
         main(["compare", "--capture", str(WALK), "--truth", str(truth), "--frames", "0-1", "--start", "truth",
               "--rows", "icp:silh", "--out", str(tmp_path / "c")])
+
+
+def test_a_limb_off_its_landmarks_is_refitted_to_them(walk):
+    """The keypoint proposal: an estimate whose left arm is swung 80 degrees away from the truth is
+    refitted to the triangulated landmarks (and the local fit), kept because it lowers the energy, and
+    brings the left wrist back near the truth."""
+    body, gt = walk["body"], walk["gt"]
+    tracker = make_tracker(walk, particles=20, iterations=2, seed=0)
+    tracker.initialise(0, initial_pose=gt[0])
+    feats = tracker.load_frame(1, gt[1][None])
+    wrong = gt[1].copy()
+    flex = [i for i, d in enumerate(body.dofs) if d.role == "l_shoulder"][0]
+    wrong[flex] += np.deg2rad(80.0)
+    relative = tracker.to_relative(wrong)
+    energy = float(tracker._energy_fn(relative[None])[0])
+    off = tracker._limbs_off(relative)
+    assert off["left arm"] > 0.1 and off["right arm"] < 0.1
+    fixed, fixed_energy, _ = tracker._keypoint_proposal(feats, relative, energy, 0, off)
+    wrist = body.skeleton.index["LeftHand"]
+    error = [np.linalg.norm(body.joint_positions(p[None])[0, wrist] - body.joint_positions(gt[1][None])[0, wrist])
+             for p in (wrong, tracker.to_absolute(fixed))]
+    print(f"left wrist {1000 * error[0]:.0f} -> {1000 * error[1]:.0f} mm, energy {energy:.3f} -> {fixed_energy:.3f}")
+    assert fixed_energy < energy and tracker.proposals[-1] == {"limbs": ["left arm"], "kept": True}
+    assert error[1] < 0.06 < error[0]
