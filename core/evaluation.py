@@ -103,3 +103,33 @@ def plot_per_frame(frames, errors, path, title="mean 3D joint error per frame"):
                 0.45, (0, 0, 0), 1)
     cv2.imwrite(str(path), img)
     return path
+
+
+# The keypoint-triangulation baseline (what FreeMoCap and Pose2Sim do): joints -> BlazePose landmark.
+TRIANGULATION_JOINTS = {"l_shoulder": 11, "r_shoulder": 12, "l_elbow": 13, "r_elbow": 14, "l_wrist": 15,
+                        "r_wrist": 16, "l_hip": 23, "r_hip": 24, "l_knee": 25, "r_knee": 26, "l_ankle": 27,
+                        "r_ankle": 28}
+
+
+def triangulation_errors(keypoints_path, cameras, truth_path):
+    """The learned landmarks a result was solved with (keypoints.npz), triangulated on their own per frame
+    (left/right swaps resolved across views as the tracker does) -> (frames, errors (F,12) metres) against
+    the truth's joints of TRIANGULATION_JOINTS, and those joints' names. The baseline the tracker must beat."""
+    from .keypoint_fit import resolve_swaps, triangulate
+
+    with np.load(keypoints_path) as d:
+        frames, uv, vis = d["frames"].astype(np.int64), d["uv"], d["visibility"]
+    t_names, t_frames, t_pos = load_joints(truth_path)
+    joints = list(TRIANGULATION_JOINTS)
+    ti = joint_indices(t_names, str(truth_path))[[list(EVAL_JOINTS).index(j) for j in joints]]
+    landmarks = np.array([TRIANGULATION_JOINTS[j] for j in joints])
+    swap = np.array([joints.index(j.replace("l_", "r_") if j.startswith("l_") else j.replace("r_", "l_"))
+                     for j in joints])
+    common, k_at, t_at = np.intersect1d(frames, t_frames, return_indices=True)
+    errors = []
+    for k, t in zip(k_at, t_at):
+        weight = np.where(vis[k][:, landmarks] > 0, 0.25 + 0.75 * vis[k][:, landmarks], 0.0)
+        points, weight = resolve_swaps(cameras, uv[k][:, landmarks], weight, swap)
+        X, ok = triangulate(cameras, points, weight)
+        errors.append(np.where(ok, np.linalg.norm(X - t_pos[t][ti], axis=1), np.nan))
+    return common, np.array(errors), joints

@@ -6,14 +6,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.evaluation import EvaluationError, joint_errors, plot_per_frame, summarise
+from ..core.evaluation import EVAL_JOINTS, EvaluationError, joint_errors, plot_per_frame, summarise
 
 
 def add_arguments(p):
     p.add_argument("--result", type=Path, required=True, help="result folder (holding joints.npz, poses.npz)")
     p.add_argument("--truth", type=Path, help="ground truth joints (gt_joints.npz); without it, the agreement "
                                               "with the learned evidence is measured (needs --capture)")
-    p.add_argument("--capture", type=Path, help="the capture folder the result was tracked on")
+    p.add_argument("--capture", type=Path, help="the capture folder the result was tracked on (with --truth: also "
+                                                "the error of its landmarks triangulated alone, the baseline)")
     p.add_argument("--scene", type=Path, help="SUBJECT.blend tracked (default: CAPTURE/subject.blend)")
     p.add_argument("--sheet", type=Path, help="write a contact sheet PNG: every view, every --every frames")
     p.add_argument("--every", type=int, default=10, help="frame step of the contact sheet (default 10)")
@@ -37,6 +38,28 @@ def _print_truth(args):
     print("per joint (mm): " + ", ".join(f"{k} {v:.0f}" for k, v in summary.per_joint_mm.items()))
     print(f"plot: {plot}")
     print(summary.json_line(result=str(args.result)))
+
+
+def _print_triangulation(args):
+    """The same joints from the result and from triangulating its landmarks alone (needs --capture)."""
+    from ..core.capture.capture import load_capture
+    from ..core.evaluation import triangulation_errors
+
+    keypoints = Path(args.result) / "keypoints.npz"
+    if not keypoints.is_file():
+        raise EvaluationError(f"{keypoints} is missing: the result was tracked without learned evidence")
+    capture = load_capture(args.capture)
+    frames, tri, joints = triangulation_errors(keypoints, capture.cameras, args.truth)
+    t_frames, tracked = joint_errors(Path(args.result) / "joints.npz", args.truth)
+    keep = np.isin(t_frames, frames)
+    cols = [list(EVAL_JOINTS).index(j) for j in joints]
+    tracked_mm = 1000 * tracked[keep][:, cols].mean()
+    tri_mm = 1000 * np.nanmean(tri)
+    missing = float(np.isnan(tri).mean())
+    print(f"the same {len(joints)} limb joints over {len(frames)} frames: tracked {tracked_mm:.1f} mm, landmarks "
+          f"triangulated alone {tri_mm:.1f} mm ({100 * missing:.1f} % not triangulated)")
+    print(json.dumps({"result": str(args.result), "joints": joints, "tracked_mm": tracked_mm,
+                      "triangulated_mm": tri_mm, "not_triangulated": missing}))
 
 
 def _load_result(result_dir):
@@ -101,10 +124,12 @@ def run(args):
     try:
         if args.truth is not None:
             _print_truth(args)
+            if args.capture is not None:
+                _print_triangulation(args)
         elif args.capture is None:
             raise EvaluationError("give --truth gt_joints.npz, or --capture CAPTURE to measure against the "
                                   "learned evidence when there is no ground truth")
-        if args.capture is not None and (args.truth is None or args.sheet is not None):
+        if args.capture is not None and (args.truth is None or args.sheet is not None):  # no truth: agreement
             from ..core.capture.capture import load_capture
             from ..core.proxy import make_proxy
 
