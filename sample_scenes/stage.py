@@ -223,60 +223,55 @@ def build_lights(bpy, uncontrolled, n_frames, busy=False):
         tints = [(1.0, 0.85, 0.65), (0.7, 0.8, 1.0), (1.0, 0.82, 0.6), (0.72, 0.82, 1.0), (1.0, 0.95, 0.85)]
         # the hanging lamp is on the same dimmer, so the whole image changes together, as it does with a
         # camera's exposure and white-balance swings (its swinging still moves light and shadows locally)
-        pl = bpy.data.lights.new("LampLight", "POINT")
-        pl.color = (1.0, 0.8, 0.5)
-        lamp = bpy.data.objects.new("LampLight", pl)
-        scene.collection.objects.link(lamp)
-        lamp.parent = bpy.data.objects["LampPivot"]
-        lamp.location = (0, 0, -1.35)
+        pl = _swinging_lamp_light(bpy)
         for f, e, c in zip(keys, envelope, tints):
-            sun_data.energy = 3.0 * e
-            sun_data.color = c
-            sun_data.keyframe_insert("energy", frame=float(f))
-            sun_data.keyframe_insert("color", frame=float(f))
-            bg.inputs["Strength"].default_value = 0.3 * e
-            bg.inputs["Strength"].keyframe_insert("default_value", frame=float(f))
-            for ad in areas:
-                ad.energy = 450.0 * e
-                ad.color = c
-                ad.keyframe_insert("energy", frame=float(f))
-                ad.keyframe_insert("color", frame=float(f))
-            pl.energy = 150.0 * e
-            pl.keyframe_insert("energy", frame=float(f))
+            _key_light_level(sun_data, areas, bg, pl, f, e, c, (3.0, 450.0, 150.0))
+
+
+def _swinging_lamp_light(bpy):
+    """The point light that hangs from the swinging lamp (its pivot is built with the room)."""
+    pl = bpy.data.lights.new("LampLight", "POINT")
+    pl.color = (1.0, 0.8, 0.5)
+    lamp = bpy.data.objects.new("LampLight", pl)
+    bpy.context.scene.collection.objects.link(lamp)
+    lamp.parent = bpy.data.objects["LampPivot"]
+    lamp.location = (0, 0, -1.35)
+    return pl
+
+
+def _key_light_level(sun_data, areas, bg, pl, frame, level, colour, energies, tint_world=False):
+    """Key every source at one dimmer level and colour; energies = (sun, each area, lamp) at level 1."""
+    f = float(frame)
+    sun_data.energy = energies[0] * level
+    sun_data.color = colour
+    sun_data.keyframe_insert("energy", frame=f)
+    sun_data.keyframe_insert("color", frame=f)
+    bg.inputs["Strength"].default_value = 0.3 * level
+    bg.inputs["Strength"].keyframe_insert("default_value", frame=f)
+    if tint_world:
+        bg.inputs["Color"].default_value = (*colour, 1)
+        bg.inputs["Color"].keyframe_insert("default_value", frame=f)
+    for ad in areas:
+        ad.energy = energies[1] * level
+        ad.color = colour
+        ad.keyframe_insert("energy", frame=f)
+        ad.keyframe_insert("color", frame=f)
+    pl.energy = energies[2] * level
+    pl.keyframe_insert("energy", frame=f)
 
 
 def _busy_lights(bpy, sun, sun_data, areas, bg, n_frames):
     """The busy scene: every source on one fast dimmer (about 8x between the darkest and the brightest
     key) that swings between warm tungsten and cool daylight, a low sun that sweeps round the room
     (its shadows move across the floor and the walls), and the swinging lamp on the same dimmer."""
-    scene = bpy.context.scene
     keys = np.linspace(1, n_frames, 8)
     envelope = [1.0, 0.16, 0.85, 0.13, 1.1, 0.3, 0.95, 0.2]
     warm, cool = (1.0, 0.68, 0.42), (0.6, 0.76, 1.0)
     tints = [warm, cool, cool, warm, cool, warm, warm, cool]
     sun_data.angle = math.radians(3)
-    pl = bpy.data.lights.new("LampLight", "POINT")
-    pl.color = (1.0, 0.8, 0.5)
-    lamp = bpy.data.objects.new("LampLight", pl)
-    scene.collection.objects.link(lamp)
-    lamp.parent = bpy.data.objects["LampPivot"]
-    lamp.location = (0, 0, -1.35)
-    for k, (f, e, c) in enumerate(zip(keys, envelope, tints)):
-        sun_data.energy = 4.0 * e
-        sun_data.color = c
-        sun_data.keyframe_insert("energy", frame=float(f))
-        sun_data.keyframe_insert("color", frame=float(f))
-        bg.inputs["Strength"].default_value = 0.3 * e
-        bg.inputs["Color"].default_value = (*c, 1)
-        bg.inputs["Strength"].keyframe_insert("default_value", frame=float(f))
-        bg.inputs["Color"].keyframe_insert("default_value", frame=float(f))
-        for ad in areas:
-            ad.energy = 400.0 * e
-            ad.color = c
-            ad.keyframe_insert("energy", frame=float(f))
-            ad.keyframe_insert("color", frame=float(f))
-        pl.energy = 200.0 * e
-        pl.keyframe_insert("energy", frame=float(f))
+    pl = _swinging_lamp_light(bpy)
+    for f, e, c in zip(keys, envelope, tints):
+        _key_light_level(sun_data, areas, bg, pl, f, e, c, (4.0, 400.0, 200.0), tint_world=True)
     # the sun sweeps 150 degrees round the room at a low elevation: long shadows that move
     for f in np.linspace(1, n_frames, 6):
         a = (f - 1) / max(n_frames - 1, 1)
