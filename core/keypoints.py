@@ -7,9 +7,8 @@ rig preset works):
   ("role", "end")    the head of the first child of the role's last bone (the joint it ends at)
   ("role", "front")  the most forward mesh vertex of the role's body part above the role's end
                      (the nose on the head), carried by the bone that weighs most on that vertex
-BlazePose's hips sit a little higher and wider than the anatomical hip joints; measured on the walk
-and playground scenes (crop from the true pose, frames 0/15) the 2D distance is 2-19 px at 640x480,
-within the model's scatter, so no offset is applied.
+BlazePose's landmarks do not sit on the rig's joints: LANDMARK_OFFSETS moves each rig point to where
+the model puts that landmark, measured on the walk and playground scenes (see its comment).
 """
 from __future__ import annotations
 
@@ -28,6 +27,18 @@ LANDMARK_POINTS = {
     25: ("l_knee", "head"), 26: ("r_knee", "head"),
     27: ("l_ankle", "head"), 28: ("r_ankle", "head"),
     31: ("l_ankle", "end"), 32: ("r_ankle", "end"),  # foot index ~ the toes' base
+}
+# Where BlazePose puts a landmark relative to the rig point above, in the carrying bone's frame: (outwards
+# for the landmark's side, forwards, up) in units of the rig's trunk (root head to neck head), so the same
+# numbers serve any rig size. Measured on walk and playground (every other frame, crops from the true
+# pose, landmarks triangulated over the 4 views, the median over frames and both sides): the landmarks lay
+# 0.045-0.088 trunk (24-48 mm on the 0.54 m trunk) from the joints, 0.032-0.058 around these medians.
+# The hips sit forward of and below the hip joints, the wrists and shoulders inside the joints.
+LANDMARK_OFFSETS = {
+    0: (0.0, -0.036, -0.060),
+    11: (-0.035, -0.029, 0.005), 13: (0.019, 0.057, 0.026), 15: (-0.043, 0.030, 0.024),
+    23: (-0.013, 0.072, -0.049), 25: (0.031, -0.037, -0.026), 27: (0.049, -0.001, 0.038),
+    31: (0.051, -0.001, -0.058),
 }
 # Robust loss rho(r) = r^2 / (r^2 + sigma^2) on the distance r in units of the person's size in the view
 # (the crop side / margin): a landmark off by more than a few sigma costs ~1 whatever its distance, so
@@ -113,7 +124,25 @@ def rig_keypoints(body):
     landmarks = np.array(landmarks)
     where = {lm: i for i, lm in enumerate(landmarks)}
     swap = np.array([where.get(int(SWAP_ORDER[lm]), i) for i, lm in enumerate(landmarks)])
-    return RigKeypoints(landmarks, np.array(bones), np.array(points), swap)
+    points = np.array(points)
+    points[:, :3] += landmark_offsets(body, landmarks)
+    return RigKeypoints(landmarks, np.array(bones), points, swap)
+
+
+def landmark_offsets(body, landmarks):
+    """(K,3) rest-space shift of each landmark's rig point: LANDMARK_OFFSETS, mirrored for the right side."""
+    from .body import body_frame
+
+    sk = body.skeleton
+    frame = body_frame(sk, body.roles)
+    trunk = np.linalg.norm(sk.rest[sk.index[body.roles["neck"][0]], :3, 3]
+                           - sk.rest[sk.index[body.roles["root"][0]], :3, 3])
+    out = np.zeros((len(landmarks), 3))
+    for i, lm in enumerate(landmarks):
+        side = 1.0 if lm in LANDMARK_OFFSETS else -1.0  # the table holds the nose and the left side
+        outwards, forwards, up = LANDMARK_OFFSETS.get(int(lm), LANDMARK_OFFSETS.get(int(SWAP_ORDER[lm]), (0, 0, 0)))
+        out[i] = trunk * (side * outwards * frame.left + forwards * frame.forward + up * frame.up)
+    return out
 
 
 @dataclass

@@ -140,16 +140,29 @@ def keypoint_term(body, cameras, evidence, poses):
     return keypoint_energy(projected, targets, rig.swap)
 
 
-def test_rig_points_sit_on_the_joints(walk_truth):
+def test_rig_points_sit_at_the_joints_moved_by_the_landmark_offsets(walk_truth):
+    """Each limb landmark's rig point is its joint moved by LANDMARK_OFFSETS in the bone's frame: in the
+    rest pose by exactly the table's (outwards, forwards, up) x trunk, mirrored for the right side; posed,
+    at the same distance from its joint (the bone carries it rigidly)."""
+    from markerless_mocap.core.body import body_frame
+    from markerless_mocap.core.keypoints import LANDMARK_OFFSETS
+
     body, poses, cameras, rig = walk_truth
+    sk = body.skeleton
+    frame = body_frame(sk, body.roles)
+    trunk = np.linalg.norm(sk.rest[sk.index["Neck"], :3, 3] - sk.rest[sk.index["Hips"], :3, 3])
     heads = body.joint_positions(poses[:1])[0]
-    pts = rig.world(body, poses[:1])[0]
-    index = body.skeleton.index
+    posed = rig.world(body, poses[:1])[0]
     for lm, bone in LIMB_LANDMARKS.items():
         k = list(rig.landmarks).index(lm)
-        assert np.linalg.norm(pts[k] - heads[index[bone]]) < 1e-9
-    nose = pts[list(rig.landmarks).index(0)]
-    assert nose[2] > heads[index["Neck1"]][2]  # above the neck, on the face
+        outwards, forwards, up = LANDMARK_OFFSETS[lm if lm % 2 else lm - 1]
+        side = 1 if lm % 2 else -1
+        at_rest = rig.rest_points[k, :3] - sk.rest[sk.index[bone], :3, 3]
+        np.testing.assert_allclose(at_rest @ np.stack([frame.left, frame.forward, frame.up]).T,
+                                   trunk * np.array([side * outwards, forwards, up]), atol=1e-9)
+        assert np.linalg.norm(posed[k] - heads[sk.index[bone]]) == pytest.approx(np.linalg.norm(at_rest), abs=1e-6)
+    nose = posed[list(rig.landmarks).index(0)]
+    assert nose[2] > heads[sk.index["Neck1"]][2]  # above the neck, on the face
 
 
 def test_keypoint_term_prefers_the_truth_to_perturbations(walk_truth):
