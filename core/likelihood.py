@@ -60,6 +60,11 @@ ENERGY_SCALE = 0.5
 # The person's joints should span about this many energy pixels (energy_scale_for): at most 0.5 x the sample
 # scenes' 640x480 footage, where every figure in the README was measured [DESIGN].
 ENERGY_PERSON_PX = 120.0
+# ... and about this many for the local fit after the search (TrackingSettings.refine_scale): the rims of
+# forearms and shins are a few pixels wide at 120. Measured, seed 0, the default pipeline tracked at 0.5
+# with the whole pipeline at full resolution instead: walk 16.6 -> 13.6 mm, busy 33.9 -> 28.2 mm, at 4.6x
+# the time per frame; the refinement alone at this size costs far less (README, "How it tracks").
+REFINE_PERSON_PX = 240.0
 # The Chamfer silhouette's second sum counts each observed pixel's distance to the model up to this many
 # capture pixels [DESIGN]. Untruncated, foreground far from the body (a box sliding, a lamp swinging in the
 # playground scene: observed pixels 50-60 px from the true mask on average in some views) dominates

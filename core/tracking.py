@@ -16,6 +16,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .features import BackgroundModel, compute_view_features
+from .features.mask_cleanup import check_mask
+from .features.view_features import feature_size, resize_mask
 from .likelihood import default_pose_at
 from .limb_search import limb_dofs, search_limbs
 from .optimizers import PoseSpace, make_optimizer
@@ -99,6 +101,10 @@ class TrackingSettings:
     # playground ties at 17.9 mm. The particles settle the ambiguous directions (which arm is where); the
     # local fit then gets below the truth's energy where the particles stop short.
     refine: str = "icp"
+    # The local fit looks at finer silhouettes than the search: None picks the resolution at which the
+    # person's joints span about likelihood.REFINE_PERSON_PX pixels (at most the footage's), from the
+    # person's size in the views as the energy resolution is.
+    refine_scale: float | None = None
     optimizer_options: dict = field(default_factory=dict)
 
     @property
@@ -133,7 +139,7 @@ class Tracker:
         self.capture = capture
         self.settings = settings or TrackingSettings()
         self.proxy = proxy or make_proxy(body, self.settings.proxy_triangles)
-        from .likelihood import energy_scale_for
+        from .likelihood import REFINE_PERSON_PX, energy_scale_for
 
         scale = self.settings.energy_scale
         if scale is None:  # the person (as the subject is placed) about 120 energy pixels tall
@@ -142,6 +148,11 @@ class Tracker:
         self.energy = energy_model or EnergyModel(body, self.proxy, capture.cameras, self.settings.likelihood,
                                                   prior=prior, backend=self.settings.backend, **kwargs)
         self.scale = self.energy.scale
+        self.refine_scale = self.settings.refine_scale
+        if self.refine_scale is None:
+            self.refine_scale = max(self.scale, energy_scale_for(body, capture.cameras, body.default_pose(),
+                                                                 person_px=REFINE_PERSON_PX, largest=1.0))
+        self.fine_silhouettes = None
         self.dynamics = dynamics
         if self.settings.refine not in ("icp", "none"):
             raise ValueError(f"refine must be 'icp' or 'none', got {self.settings.refine!r}")
@@ -214,6 +225,13 @@ class Tracker:
             self.evidence = self.observe(images, guide_poses)
             if self.energy.weights.mask == "learned":
                 masks = [ev.mask if ev.found else None for ev in self.evidence]
+        masks = [self.backgrounds[cam.name].silhouette(images[cam.name]) if mask is None else mask
+                 for cam, mask in zip(cams, masks)]
+        self.fine_silhouettes = None
+        if self.refines and self.refine_scale != self.scale:
+            self.fine_silhouettes = [resize_mask(check_mask(mask), feature_size(images[cam.name].shape,
+                                                                                self.refine_scale))
+                                     for cam, mask in zip(cams, masks)]
         return [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
                                       diffuse=self.uses_color, silhouette=mask)
                 for cam, mask in zip(cams, masks)]
@@ -462,7 +480,9 @@ class Tracker:
     def _icp_fit(self, feats, estimate):
         from .optimizers.icp import IcpSettings, IcpSolver
 
-        return IcpSolver(self._icp_problem(feats), self.space, IcpSettings()).fit(estimate).pose
+        fine = self.fine_silhouettes is not None
+        settings = IcpSettings().at_resolution(self.refine_scale / self.scale) if fine else IcpSettings()
+        return IcpSolver(self._icp_problem(feats, fine), self.space, settings).fit(estimate).pose
 
     def _refine(self, feats, estimate):
         """ICP from the optimiser's (relative) estimate; the kept particles move by the same step."""
@@ -471,15 +491,18 @@ class Tracker:
         self._map_pose_state(lambda poses: self.space.clamp(poses + step), PARTICLE_STATE_ATTRIBUTES)
         return fitted
 
-    def _icp_problem(self, feats):
+    def _icp_problem(self, feats, fine=False):
+        """The frame for ICP: at the energy resolution, or (fine) on the refinement's silhouettes."""
         from .optimizers.icp import IcpProblem
 
-        cameras = [c.scaled(self.scale) for c in self.capture.cameras]
+        scale = self.refine_scale if fine else self.scale
+        cameras = [c.scaled(scale) for c in self.capture.cameras]
+        silhouettes = self.fine_silhouettes if fine else [f.silhouette for f in feats]
         keypoints = self.energy.keypoints if self.evidence is not None and self.energy.weights.keypoint else None
         return IcpProblem(body=self.body, proxy=self.proxy, cameras=cameras,
-                          silhouettes=[f.silhouette for f in feats], to_absolute=self.to_absolute,
+                          silhouettes=silhouettes, to_absolute=self.to_absolute,
                           prior=getattr(self.energy, "prior", None),
-                          keypoints=None if keypoints is None else keypoints.scaled(self.scale),
+                          keypoints=None if keypoints is None else keypoints.scaled(scale),
                           rig_points=self.energy.rig_points if keypoints is not None else None)
 
     def _record(self, frame, pose, energy, seconds, evaluations):

@@ -78,6 +78,7 @@ class TrackSession:
                                                             self.settings.seed)
         self.tracker = Tracker(self.body, self.capture, self.settings, prior=self.prior, dynamics=self.dynamics)
         self.writer.info["energy_scale"] = self.tracker.scale
+        self.writer.info["refine_scale"] = self.tracker.refine_scale if self.tracker.refines else None
         if self._resume_state is not None:
             self.tracker.restore(self._resume_state)
             self.tracker.estimates = list(self.writer.estimates)

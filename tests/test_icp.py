@@ -415,3 +415,30 @@ def test_bad_problems_are_named(subject):
         IcpProblem(body, proxy, cams, sils, prior=object())
     with pytest.raises(ValueError, match="d_min"):
         IterativeClosestPoint(space, d_min=30.0, d_max=20.0)
+
+
+def test_icp_on_finer_silhouettes_with_settings_at_that_resolution(subject):
+    """The tracker's refinement runs on silhouettes finer than the search's, with IcpSettings.at_resolution:
+    the same starts fitted on half-resolution images (default settings) and on the full ones (settings at
+    2x) both converge, and the finer fit ends no worse (measured: 84 -> 17.3 mm on half, 17.2 mm on full)."""
+    body, proxy, space, x_true, cams, sils = subject
+    half = [cam.scaled(0.5) for cam in cams]
+    verts = proxy.deform(body, x_true[None])[0]
+    half_sils = []
+    for cam in half:
+        uv, z = cam.project_with_depth(verts)
+        half_sils.append(np.isfinite(depth_buffer(uv, z, proxy.faces, cam.width, cam.height)))
+    coarse = IcpSolver(IcpProblem(body, proxy, half, half_sils), space, IcpSettings())
+    fine = IcpSolver(IcpProblem(body, proxy, cams, sils), space, IcpSettings().at_resolution(2.0))
+    rng = np.random.default_rng(3)
+    before, after_coarse, after_fine = [], [], []
+    for _ in range(3):
+        x0 = perturbed(body, x_true, rng, 0.04, 7.0)
+        before.append(joint_error_mm(body, x0, x_true))
+        after_coarse.append(joint_error_mm(body, coarse.fit(x0).pose, x_true))
+        after_fine.append(joint_error_mm(body, fine.fit(x0).pose, x_true))
+    print(f"\nICP half / full resolution: {np.round(before, 1)} -> {np.round(after_coarse, 1)} / "
+          f"{np.round(after_fine, 1)} mm")
+    assert np.mean(after_coarse) < 0.6 * np.mean(before)
+    assert np.mean(after_fine) <= np.mean(after_coarse) + 1.0
+    assert IcpSettings().at_resolution(1.0) == IcpSettings()

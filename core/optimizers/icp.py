@@ -22,6 +22,7 @@ black-box energy evaluations in its search; the base class scores the final esti
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -267,6 +268,13 @@ class IcpSettings:
     residual: str = "point"  # "point": u - p (eq. 8); "line": its component along the contour normal
     step_tol: float = 1e-4  # stop when every |delta| / scale falls below this
     cost_tol: float = 1e-4  # ... or the relative cost decrease does
+
+    def at_resolution(self, factor: float) -> "IcpSettings":
+        """The same fit on images `factor` x as fine: the pixel distances grow with them, and the prior grows
+        as the (mean, squared) image residuals do, so the balance of the terms holds."""
+        return dataclasses.replace(self, d_max=self.d_max * factor, d_min=self.d_min * factor,
+                                   huber=self.huber * factor, keypoint_huber=self.keypoint_huber * factor,
+                                   prior_weight=self.prior_weight * factor ** 2)
 
     def d_max_at(self, it: int) -> float:
         return max(self.d_min, self.d_max * 0.5 ** (it // self.shrink_every))
