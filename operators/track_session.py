@@ -139,8 +139,8 @@ class TrackSession:
 
             import bpy
 
-            export_bvh(bpy.context, self.armature, out / "animation.bvh", frames)
-            export_fbx(bpy.context, self.armature, out / "animation.fbx", frames)
+            export_bvh(bpy.context, self.armature, out / "animation.bvh", frames, scene=self.scene)
+            export_fbx(bpy.context, self.armature, out / "animation.fbx", frames, scene=self.scene)
             written.update(bvh=out / "animation.bvh", fbx=out / "animation.fbx")
         if save_blend:
             import bpy

@@ -92,6 +92,44 @@ def test_blender_command_tracks_the_open_file(addon_module_name, bpy_module, tmp
     assert arm.animation_data is not None and arm.animation_data.action is not None  # keyed in the open file
 
 
+RESULT_FILES = ("joints.npz", "poses.npz", "report.json", "animation.bvh", "animation.fbx", "tracked.blend")
+
+
+def test_blender_command_with_no_active_object_writes_every_result_file(addon_module_name, bpy_module, tmp_path):
+    """A real `blender -b FILE --command markerless_mocap track` has no `context.object`: Blender's BVH
+    exporter polls on it and refused to run (issue 14). Same state here: nothing selected, nothing active,
+    and the context masks `object` (setting the view layer's active object does not bring it back, as in
+    `--command`). The command must still write every result file, exports and overlays included."""
+    from conftest import SAMPLE_SCENES
+
+    bpy = bpy_module
+    walk = SAMPLE_SCENES / "walk"
+    bpy.ops.wm.open_mainfile(filepath=str(walk / "subject.blend"))
+    view_layer = bpy.context.view_layer
+    for o in view_layer.objects:
+        o.select_set(False)
+    view_layer.objects.active = None
+    no_object = dict(object=None, active_object=None, selected_objects=[], selected_editable_objects=[])
+    operators = _module(addon_module_name, "operators")
+    assert operators._cli_handle is not None and operators.CLI_NAME == "markerless_mocap"
+    cli = _module(addon_module_name, "operators.cli")  # the function registered under that name
+    out = tmp_path / "result"
+    with bpy.context.temp_override(**no_object):
+        view_layer.objects.active = next(o for o in view_layer.objects if o.type == "ARMATURE")
+        assert bpy.context.object is None and not bpy.ops.export_anim.bvh.poll()  # the state that failed
+        view_layer.objects.active = None
+        code = cli.blender_command(["track", "--capture", str(walk), "--out", str(out), "--frames", "0-1",
+                                    "--particles", "20", "--iterations", "3"])
+    assert code == 0
+    for name in RESULT_FILES:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    overlays = sorted(p.name for p in (out / "overlay").glob("*.mp4"))
+    assert len(overlays) == 4, overlays
+    bvh = (out / "animation.bvh").read_text()
+    assert "Frames: 2" in bvh
+    assert bpy.context.view_layer.objects.active is None  # the user's selection state is given back
+
+
 # ----------------------------------------------------------------------------- panels
 class _FakeLayout:
     """Stands in for UILayout in background mode and checks what the panels ask it to draw."""
