@@ -270,8 +270,9 @@ class FakeSession:
     block_at = None  # index of the frame whose solve waits for `release`
 
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 log=None, units=None):
+                 log=None, units=None, step=None):
         FakeSession.last = self
+        self.step = step or (lambda text, fraction: None)
         self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume,
                          units=units)
         self.scene, self.armature = scene, armature_obj
@@ -294,6 +295,10 @@ class FakeSession:
         if index == self.block_at:
             self.blocked.set()
             assert self.release.wait(10)
+        if index == 0:  # the real session's one-off preparation, before the first frame
+            self.step("fake preparation", 0.0)
+            self.step("fake preparation", 0.5)
+            self.step(None, 1.0)
         frame = self.frames[index]
         self.solved.append(frame)
         return Estimate(frame, np.array([frame / 10.0]), np.zeros((1, 3)), 1.0 / (1 + frame), 0.01, 3000)
@@ -354,6 +359,93 @@ def test_track_execute_keys_every_frame_and_finishes(fake_track):
     assert m.seconds_per_frame == pytest.approx(0.01)
 
 
+def test_status_is_one_line_per_frame_and_the_preparation_its_own_step(fake_track):
+    """Issue 14: the first message stayed appended to every later frame's status, and the one-off
+    preparation (about 45 s on a new rig) showed no progress. Now: the preparation is a step with its
+    percentage and its own bar; each frame's line is 'Frame k of n, s/frame, time left' and nothing else."""
+    import re
+
+    bpy, track, _arm, _compat, tmp_path = fake_track
+    m = bpy.context.scene.mocap
+    job = track.TrackJob()
+    session = FakeSession(bpy.context.scene, _arm, tmp_path, tmp_path, frames=[0, 1, 2, 3],
+                          log=job.report_progress, step=job.report_step)
+    job._attach(session)
+    m.is_tracking = True
+    shown = []
+
+    def show():
+        job.drain()
+        track.MOCAP_OT_track._show(None, bpy.context, job)
+        shown.append((m.status, m.preparing, round(m.progress, 3)))
+        log = _draw_all(bpy)
+        return [entry for entry in log if entry[0] == "progress"]
+
+    show()
+    assert shown[-1][0] == "Frame 1 of 4: solving (the first frame searches the whole body) - fake session ready"
+    job.report_step("anatomical prior and dynamics for this rig", 0.4)
+    bars = show()
+    assert shown[-1] == ("Preparing (once per rig): anatomical prior and dynamics for this rig, 40 %", True, 0.4)
+    assert bars == [("progress", pytest.approx(0.4), "Preparing 40 %")]
+    for k in range(1, 5):
+        estimate = session.solve_next()
+        job.queue.put(("frame", estimate))
+        bars = show()
+        status, preparing, progress = shown[-1]
+        assert re.fullmatch(rf"Frame {k} of 4, 0\.0 s/frame, about \d+ s left", status), status
+        assert not preparing and progress == pytest.approx(k / 4)
+        assert bars == [("progress", pytest.approx(k / 4), f"{k}/4 frames")]
+    assert shown[-1][0] == "Frame 4 of 4, 0.0 s/frame, about 0 s left"
+    # a message sent later is shown with the next line only, then dropped
+    job.report_progress("limb search: left arm")
+    show()
+    assert shown[-1][0].endswith(" - limb search: left arm")
+    m.is_tracking = False
+
+
+def test_time_left_uses_the_recent_frames_not_the_first_search(fake_track):
+    _bpy, track, _arm, _compat, tmp_path = fake_track
+    job = track.TrackJob()
+    job._attach(FakeSession(None, None, tmp_path, tmp_path, frames=list(range(10))))
+    for frame, seconds in enumerate((60.0, 2.0, 4.0)):
+        job.estimates.append(Estimate(frame, None, None, 0.0, seconds, 0))
+    assert job.seconds_left == pytest.approx(7 * 3.0)
+    assert track._status_line(job) == "Frame 3 of 10, 3.0 s/frame, about 21 s left"  # 7 x 3 s, not 7 x 22 s
+    job.estimates.append(Estimate(3, None, None, 0.0, 100.0, 0))
+    assert track._status_line(job) == "Frame 4 of 10, 35.3 s/frame, about 3 min 32 s left"  # 6 x (2+4+100)/3
+
+
+def test_session_reports_its_preparation_as_steps(monkeypatch, tmp_path):
+    """The real TrackSession: the motion models' progress arrives as (text, fraction) steps, rising, then
+    (None, 1.0) once the tracker is built; the cheap motion-library callback is real, the model fit faked."""
+    from markerless_mocap.core import motion_library
+    from markerless_mocap.operators import track_session
+
+    calls = []
+
+    def fake_build(body, capture_folder, fps, seed=0, progress=None):
+        for i in range(3):
+            progress(i / 3, f"mapping motion clip {i + 1} of 3 onto the rig")
+        progress(0.9, "fitting the anatomical prior and the dynamics")
+        raise _Stop
+
+    class _Stop(Exception):
+        pass
+
+    session = track_session.TrackSession.__new__(track_session.TrackSession)
+    session.tracker, session.prior = None, None
+    session.body, session.capture_dir, session.settings = None, tmp_path, type("S", (), {"seed": 0})()
+    session.capture = type("C", (), {"frames": type("F", (), {"fps": 30.0})()})()
+    session.step = lambda text, fraction: calls.append((text, fraction))
+    monkeypatch.setattr(track_session, "build_motion_models", fake_build)
+    with pytest.raises(_Stop):
+        session.prepare()
+    fractions = [f for _t, f in calls]
+    assert calls[0][0].startswith("anatomical prior and dynamics") and fractions == sorted(fractions)
+    assert calls[-1] == ("fitting the anatomical prior and the dynamics", pytest.approx(0.85 * 0.9))
+    assert motion_library.build_motion_models.__code__.co_varnames.count("progress") == 1
+
+
 def test_track_resume_rekeys_earlier_frames_and_counts_them(fake_track):
     bpy, _, arm, compat, _ = fake_track
     m = bpy.context.scene.mocap
@@ -409,7 +501,7 @@ def test_threaded_job_cancel_keeps_solved_frames(fake_track, monkeypatch):
     session = track.build_session(bpy.context, log=job.report_progress)
     job.start(session)
     _drain_until(job, lambda: len(job.estimates) == 1 and session.blocked.is_set())
-    assert job.status == "fake session ready"
+    assert job.status == ""  # the session's first message went with the first frame (it used to stick)
     assert job.fraction == pytest.approx(1 / 3)
     job.request_cancel()  # Esc while frame 1 is being solved: it completes, frame 2 never starts
     session.release.set()
