@@ -91,7 +91,8 @@ setup_venv313() {  # prints nothing and returns 1 when there is no Python 3.13
 # The Blender 5.1/5.2 subset: every test file that checks the Blender/Python/numpy boundary, plus one
 # short tracking run on numpy 2 (about 3 min on the 2-core machines).
 PY313_TESTS=(tests/test_build_install.py tests/test_addon_ui.py tests/test_export.py
-             "tests/test_tracking.py::test_a_few_tracked_frames_stay_near_the_truth")
+             "tests/test_tracking.py::test_a_few_tracked_frames_stay_near_the_truth"
+             "tests/test_sample_scenes.py::test_subject_opens_and_is_version_neutral")
 
 cmd="${1:-env}"; shift || true
 case "$cmd" in
