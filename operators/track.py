@@ -227,6 +227,10 @@ def _status_line(job):
         line = f"Frame {done + 1} of {job._total}: solving"
         if done == job._done_before:
             line += " (the first frame searches the whole body)"
+    elif len(job.estimates) == 1 and job._done_before == 0 and done < job._total:
+        # the first frame's whole-body search says nothing about the tracked frames' pace
+        line = (f"Frame 1 of {job._total}, {job.estimates[0].seconds:.1f} s (the first frame's whole-body "
+                f"search); time left after frame 2")
     else:
         line = (f"Frame {done} of {job._total}, {job.recent_seconds_per_frame:.1f} s/frame, "
                 f"about {_duration(job.seconds_left)} left")

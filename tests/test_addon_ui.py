@@ -392,7 +392,10 @@ def test_status_is_one_line_per_frame_and_the_preparation_its_own_step(fake_trac
         job.queue.put(("frame", estimate))
         bars = show()
         status, preparing, progress = shown[-1]
-        assert re.fullmatch(rf"Frame {k} of 4, 0\.0 s/frame, about \d+ s left", status), status
+        if k == 1:
+            assert status == "Frame 1 of 4, 0.0 s (the first frame's whole-body search); time left after frame 2"
+        else:
+            assert re.fullmatch(rf"Frame {k} of 4, 0\.0 s/frame, about \d+ s left", status), status
         assert not preparing and progress == pytest.approx(k / 4)
         assert bars == [("progress", pytest.approx(k / 4), f"{k}/4 frames")]
     assert shown[-1][0] == "Frame 4 of 4, 0.0 s/frame, about 0 s left"
@@ -407,6 +410,10 @@ def test_time_left_uses_the_recent_frames_not_the_first_search(fake_track):
     _bpy, track, _arm, _compat, tmp_path = fake_track
     job = track.TrackJob()
     job._attach(FakeSession(None, None, tmp_path, tmp_path, frames=list(range(10))))
+    job.estimates.append(Estimate(0, None, None, 0.0, 60.0, 0))
+    assert track._status_line(job) == ("Frame 1 of 10, 60.0 s (the first frame's whole-body search); "
+                                       "time left after frame 2")  # not 9 x 60 s
+    job.estimates.clear()
     for frame, seconds in enumerate((60.0, 2.0, 4.0)):
         job.estimates.append(Estimate(frame, None, None, 0.0, seconds, 0))
     assert job.seconds_left == pytest.approx(7 * 3.0)
