@@ -24,10 +24,16 @@ skip() { echo "real-Blender stage SKIPPED: $*" >&2; exit 77; }
 
 mounted=()
 cleanup() {
+  set +e
   local i
-  for (( i=${#mounted[@]}-1; i>=0; i-- )); do umount -l "${mounted[$i]}" 2>/dev/null || true; done
+  for (( i=${#mounted[@]}-1; i>=0; i-- )); do umount -l "${mounted[$i]}" 2>/dev/null; done
+  return 0
 }
 trap cleanup EXIT
+unmount_under() {  # stale mounts of an interrupted run (never rm -rf through a bind mount of /dev)
+  local m
+  for m in $(awk -v d="$1/" 'index($2, d) == 1 {print $2}' /proc/mounts | sort -r); do umount -l "$m" || true; done
+}
 mnt() {  # mnt SRC DST [opts...]: bind-mount and remember
   local src="$1" dst="$2"; shift 2
   mkdir -p "$dst"
@@ -37,7 +43,8 @@ mnt() {  # mnt SRC DST [opts...]: bind-mount and remember
 
 provision() {
   local tmp="$root.partial"
-  rm -rf "$tmp"
+  unmount_under "$tmp"
+  rm -rf --one-file-system "$tmp"
   mkdir -p "$cache"
   if ! command -v debootstrap >/dev/null; then
     log "installing debootstrap"
@@ -62,6 +69,7 @@ provision() {
   touch "$root/.ready"
 }
 
+unmount_under "$root"
 if [ ! -e "$root/.ready" ]; then
   provision
 else
@@ -88,3 +96,122 @@ if [ "${1:-}" = "--resave-subjects" ]; then
   done
   exit 0
 fi
+
+# --- what the stage needs from the checkout
+venv_py="$repo/.venv/bin/python"
+[ -x "$venv_py" ] || skip "no $repo/.venv (run 'bash setup.sh env' first: the stage bundles the add-on's wheels with it)"
+rm -rf "$out"; mkdir -p "$out"
+mnt "$out" "$root/mnt/out" --bind
+fail() { echo "real-Blender stage FAILED: $*" >&2; exit 1; }
+run_in() { chroot "$root" /usr/bin/env BLENDER_USER_RESOURCES=/mnt/out/blender_user PYTHONDONTWRITEBYTECODE=1 \
+             NUMBA_CACHE_DIR=/var/cache/mocap-numba MOCAP_CACHE_DIR=/var/cache/mocap-motion "$@"; }
+
+# 1. enable the add-on from the checkout, as a local extension repository; preferences saved
+run_in blender -b --python-exit-code 1 --python "$src/tests/real_blender/enable_addon.py" -- /mnt/mocap \
+  > "$out/enable.log" 2>&1 || fail "enabling the add-on failed; see $out/enable.log"
+grep '^STAGE' "$out/enable.log" | sed 's/^STAGE/[stage]/'
+# 2. the add-on's Python packages as a user's Blender gets them: the cp313 wheels the extension zip
+#    bundles, unpacked where Blender unpacks an extension's wheels (Debian's own OpenCV 4.10 has no
+#    TFLite importer, so the learned evidence needs the bundled one). After the first start: Blender's
+#    extension start-up removes wheels that no installed extension lists from that folder
+pyver="$(run_in blender -b --factory-startup --python-expr 'import sys; print("PYVER %d.%d" % sys.version_info[:2])' 2>/dev/null \
+         | sed -n 's/^PYVER //p')"
+[ -n "$pyver" ] || fail "Blender in the chroot does not start"
+log "building the extension zip for linux-x64 (wheels from dist/wheels-cache, else PyPI)"
+"$venv_py" -m markerless_mocap build --platforms linux-x64 --split-platforms --out "$out/zip" > "$out/build.log" 2>&1 \
+  || fail "the extension build failed; see $out/build.log"
+zip_path="$(ls "$out"/zip/*.zip)"
+site="$out/blender_user/extensions/.local/lib/python$pyver/site-packages"
+"$venv_py" - "$zip_path" "$site" "$pyver" <<'PY' || fail "could not unpack the bundled wheels"
+import io, sys, zipfile
+zip_path, site, pyver = sys.argv[1], sys.argv[2], tuple(int(x) for x in sys.argv[3].split("."))
+from markerless_mocap.tools import wheels
+with zipfile.ZipFile(zip_path) as zf:
+    names = [n for n in zf.namelist() if n.startswith("wheels/") and n.endswith(".whl")]
+    used = [n for n in names if wheels.wheel_fits(n.split("/")[-1], "linux-x64", pyver)]
+    for n in used:
+        zipfile.ZipFile(io.BytesIO(zf.read(n))).extractall(site)
+print(f"[stage] unpacked {len(used)} of the zip's {len(names)} wheels for Python {sys.argv[3]}: "
+      + ", ".join(n.split("/")[-1].split("-")[0] for n in used))
+PY
+
+packages="$(run_in blender -b --python-expr 'import cv2, scipy, numba, numpy; print("STAGE packages: numpy", numpy.__version__, "(Blender'"'"'s) cv2", cv2.__version__, "scipy", scipy.__version__, "numba", numba.__version__, "from", cv2.__file__)' \
+  2>/dev/null | grep '^STAGE' | sed 's/^STAGE/[stage]/')"
+echo "$packages"
+case "$packages" in *"/extensions/.local/"*) ;; *) fail "Blender does not import the bundled wheels";; esac
+
+# 3. every sample scene's subject opens in this Blender
+rc=0
+run_in blender -b --python-exit-code 1 --python "$src/tests/real_blender/open_subjects.py" -- "$src/sample_scenes" \
+  > "$out/subjects.log" 2>&1 || rc=$?
+grep '^STAGE' "$out/subjects.log" | sed 's/^STAGE/[stage]/'
+[ $rc = 0 ] || fail "a sample subject does not open in Blender 4.3.2; see $out/subjects.log"
+
+# 4. the headless command, as a user runs it
+log "blender -b walk/subject.blend --command markerless_mocap track (frames 0-2, 30 x 4)"
+track_args=(track --capture "$src/sample_scenes/walk" --frames 0-2 --particles 30 --iterations 4)
+t1=$(date +%s)
+run_in blender -b "$src/sample_scenes/walk/subject.blend" --command markerless_mocap "${track_args[@]}" \
+  --out /mnt/out/command_result > "$out/command.log" 2>&1 || fail "the --command run exited with $?; see $out/command.log"
+log "--command run took $(( $(date +%s) - t1 )) s"
+grep -q Traceback "$out/command.log" && fail "the --command run printed a traceback; see $out/command.log"
+expected=(joints.npz poses.npz keypoints.npz report.json animation.bvh animation.fbx tracked.blend checkpoint.pkl
+          overlay/cam1.mp4 overlay/cam2.mp4 overlay/cam3.mp4 overlay/cam4.mp4)
+for f in "${expected[@]}"; do
+  [ -s "$out/command_result/$f" ] || fail "the --command run did not write $f; see $out/command.log"
+done
+run_in python3 -c 'import numpy; z = numpy.load("/mnt/out/command_result/joints.npz"); f = list(z["frames"]); assert f == [0, 1, 2], f' \
+  || fail "joints.npz of the --command run does not hold frames 0-2"
+grep -q "^Frames: 3" "$out/command_result/animation.bvh" || fail "animation.bvh does not hold 3 frames"
+# the same files as the Python-module command (bpy 5.0.1 in .venv)
+"$venv_py" -m markerless_mocap "${track_args[@]/$src/$repo}" --scene "$repo/sample_scenes/walk/subject.blend" --out "$out/module_result" > "$out/module.log" 2>&1 \
+  || fail "python -m markerless_mocap track failed; see $out/module.log"
+diff <(cd "$out/command_result" && find . -type f | sort) <(cd "$out/module_result" && find . -type f | sort) \
+  > "$out/files.diff" || fail "--command and python -m wrote different files; see $out/files.diff"
+log "--command run wrote every result file: ${expected[*]} (the same set as python -m markerless_mocap track)"
+
+# 5. the UI under Xvfb: Import, Check, Track (modal), Esc, Export, with screenshots
+rm -f "$out/xvfb.display"
+chroot "$root" Xvfb -displayfd 1 -screen 0 1600x1200x24 -nolisten tcp > "$out/xvfb.display" 2> "$out/xvfb.log" &
+xvfb_pid=$!
+trap 'kill "$xvfb_pid" 2>/dev/null || true; cleanup' EXIT
+for _ in $(seq 50); do [ -s "$out/xvfb.display" ] && break; sleep 0.2; done
+display="$(head -1 "$out/xvfb.display")"
+[ -n "$display" ] || fail "Xvfb did not start; see $out/xvfb.log"
+log "UI on Xvfb :$display: Import, Check, Track (modal), Esc, Export"
+t1=$(date +%s)
+timeout 420 chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURCES=/mnt/out/blender_user \
+  PYTHONDONTWRITEBYTECODE=1 NUMBA_CACHE_DIR=/var/cache/mocap-numba MOCAP_CACHE_DIR=/var/cache/mocap-motion \
+  blender "$src/sample_scenes/walk/subject.blend" --window-geometry 0 0 1600 1200 --enable-event-simulate \
+  --python "$src/tests/real_blender/drive_ui.py" -- "$src/sample_scenes/walk" /mnt/out/ui > "$out/ui.log" 2>&1 \
+  || fail "the UI run exited with $?; see $out/ui.log"
+kill "$xvfb_pid" 2>/dev/null || true
+log "UI run took $(( $(date +%s) - t1 )) s"
+grep '^STAGE-UI' "$out/ui.log" | sed 's/^STAGE-UI/[stage-ui]/'
+python3 - "$out/ui/ui_report.json" <<'PY' || fail "the UI run did not do what a user does; see $out/ui.log and $out/ui/"
+import json, sys
+r = json.load(open(sys.argv[1]))
+problems = list(r["errors"])
+check = lambda ok, what: ok or problems.append(what)
+check(r.get("sidebar_tab") == "Mocap", f"sidebar tab {r.get('sidebar_tab')!r}, not Mocap")
+check(r.get("import", {}).get("result") == ["FINISHED"] and len(r["import"]["cameras"]) == 4, "Import Capture")
+check(r.get("check", {}).get("dofs") == 30, "Check rig: 30 DOF")
+check(r.get("track_invoke") == ["RUNNING_MODAL"], "Track did not run modal")
+cancel = r.get("cancel", {})
+check(cancel.get("status", "").startswith("Cancelled after"), f"cancel status {cancel.get('status')!r}")
+check(len(cancel.get("keyed_frames", [])) >= 2 and cancel.get("keyed_frames") == list(range(1, 1 + cancel.get("frames_solved", -1))),
+      f"keys after the cancel: {cancel.get('keyed_frames')} for {cancel.get('frames_solved')} frames")
+check(cancel.get("frames_solved", 99) < 30, "Esc did not stop the run")
+lines = r.get("status_lines", [])
+check(any(l.startswith("Frame 2 of 30, ") and l.endswith(" left") for l in lines), "no per-frame status line")
+check(not any(" - " in l for l in lines if l.startswith("Frame ")), "a message stuck to a frame's status line")
+check(r.get("max_ui_gap_s") is not None and r["max_ui_gap_s"] < 5, f"UI stalled {r.get('max_ui_gap_s')} s while tracking")
+e = r.get("export", {})
+check(e.get("fbx") == ["FINISHED"] and e.get("bvh") == ["FINISHED"] and e.get("fbx_bytes", 0) > 0 and e.get("bvh_bytes", 0) > 0, "Export")
+check(len(r.get("screenshots", [])) == 5, "screenshots")
+if problems:
+    print("\n".join("[stage-ui] FAILED: " + p for p in problems)); sys.exit(1)
+print(f"[stage-ui] passed: {len(lines)} status lines, {r['timer_ticks_while_tracking']} UI timer ticks while tracking "
+      f"(longest gap {r['max_ui_gap_s']} s), cancelled with {len(cancel['keyed_frames'])} frames keyed, screenshots in ui/")
+PY
+log "real-Blender stage PASSED in $(( $(date +%s) - t0 )) s (logs and screenshots: $out)"
