@@ -104,7 +104,9 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         row.scale_y = 1.5
         row.enabled = not props.is_tracking
         row.operator("mocap.track", icon="PLAY")
-        if props.is_tracking or props.frames_solved:
+        if props.is_tracking and props.preparing:
+            layout.progress(factor=props.progress, type="BAR", text=f"Preparing {100 * props.progress:.0f} %")
+        elif props.is_tracking or props.frames_solved:
             layout.progress(factor=props.progress, type="BAR",
                             text=f"{props.frames_solved}/{props.frames_total} frames")
         if props.status:

@@ -98,6 +98,8 @@ class MocapSettings(bpy.types.PropertyGroup):
     is_tracking: BoolProperty(name="Tracking", default=False)
     progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR")
     status: StringProperty(name="Status")
+    preparing: BoolProperty(name="Preparing", default=False,
+                            description="The one-off preparation before the first frame is running")
     last_error: StringProperty(name="Last Error")
     frames_solved: IntProperty(name="Frames Solved", default=0)
     frames_total: IntProperty(name="Frames To Solve", default=0)
@@ -132,6 +134,7 @@ def reset_run_state(_file=None):
         props = getattr(scene, "mocap", None)
         if props is not None and props.is_tracking:
             props.is_tracking = False
+            props.preparing = False
             props.status = "The previous run did not finish; its solved frames are in the output folder"
 
 

@@ -52,10 +52,12 @@ def clip_windows(n_frames, exclude, length, stride):
     return starts
 
 
-def training_sequences(body, fps=30.0, exclude=None, window=40, stride=30, max_windows=10, clips=None):
+def training_sequences(body, fps=30.0, exclude=None, window=40, stride=30, max_windows=10, clips=None,
+                       progress=None):
     """List of (T,D) pose sequences at `fps` from the bundled clips (cached per rig).
 
     exclude: {clip file stem: (first, last)} frames at `fps` to leave out.
+    progress(fraction, text): called as each clip is mapped onto the rig (not when the cache is hit).
     """
     exclude = dict(exclude or {})
     paths = sorted(MOTION_DIR.glob("*.bvh")) if clips is None else [Path(p) for p in clips]
@@ -66,7 +68,9 @@ def training_sequences(body, fps=30.0, exclude=None, window=40, stride=30, max_w
         with np.load(cached) as data:
             return [data[k] for k in sorted(data.files, key=lambda k: int(k.split("_")[1]))]
     sequences = []
-    for path in paths:
+    for i, path in enumerate(paths):
+        if progress is not None:
+            progress(i / max(1, len(paths)), f"mapping motion clip {i + 1} of {len(paths)} onto the rig")
         clip = read_bvh(path).resample(fps)
         starts = clip_windows(clip.n_frames, exclude.get(path.stem), window, stride)
         if len(starts) > max_windows:
@@ -108,10 +112,16 @@ def fit_dynamics(body, sequences, gamma=0.8):
     return LinearAR3(coeffs, offset, sigma)
 
 
-def build_motion_models(body, fps=30.0, exclude=None, seed=0, n_samples=200):
-    """(anatomical prior, AR(3) dynamics) trained on the bundled clips mapped onto this body."""
+def build_motion_models(body, fps=30.0, exclude=None, seed=0, n_samples=200, progress=None):
+    """(anatomical prior, AR(3) dynamics) trained on the bundled clips mapped onto this body.
+
+    progress(fraction, text), fraction in [0, 1]: the clips take most of the time the first time a rig
+    is seen; after that they come from the cache."""
     from .prior import AnatomicalPrior
 
-    sequences = training_sequences(body, fps=fps, exclude=exclude)
+    report = progress or (lambda fraction, text: None)
+    sequences = training_sequences(body, fps=fps, exclude=exclude,
+                                   progress=lambda f, text: report(0.9 * f, text))
+    report(0.9, "fitting the anatomical prior and the dynamics")
     prior = AnatomicalPrior.fit(np.concatenate(sequences), body.prior_groups, n_samples=n_samples, seed=seed)
     return prior, fit_dynamics(body, sequences)

@@ -23,9 +23,10 @@ def add_arguments(parser):
     parser.add_argument("--wheels-cache", type=Path, default=REPO_ROOT / "dist" / "wheels-cache",
                         help="folder of downloaded wheels reused by later builds; put hand-downloaded "
                              ".whl files here when PyPI is unreachable (default: dist/wheels-cache)")
-    parser.add_argument("--python-versions", default="3.11",
-                        help="Blender's Python version(s) to bundle wheels for: 3.11 for Blender 4.2-5.0; "
-                             "add 3.13 for Blender 5.1+ (doubles the size). Default: 3.11")
+    parser.add_argument("--python-versions", default="3.11,3.13",
+                        help="Blender's Python version(s) to bundle wheels for: 3.11 for Blender 4.2-5.0 (pinned "
+                             "in requirements.txt), 3.13 for Blender 5.1-5.2 (requirements-py313.txt). "
+                             "Default: 3.11,3.13")
     parser.add_argument("--split-platforms", action="store_true",
                         help="write one (much smaller) zip per platform instead of one zip for all")
 
@@ -57,7 +58,7 @@ class BuildFailedError(RuntimeError):
     """Blender's validator or builder rejected the staged package."""
 
 
-def build_extension(out_dir, platforms=None, python_versions=((3, 11),), cache_dir=None,
+def build_extension(out_dir, platforms=None, python_versions=((3, 11), (3, 13)), cache_dir=None,
                     split_platforms=False, repo_root=REPO_ROOT, log=print):
     """Build the zip(s) into out_dir and return their paths."""
     from ..tools import extension_builder, staging, wheels
@@ -84,7 +85,7 @@ def build_extension(out_dir, platforms=None, python_versions=((3, 11),), cache_d
         raise BuildFailedError(f"Blender's validator rejected {Path(repo_root) / 'blender_manifest.toml'}; "
                                f"fix it there:\n{output}")
 
-    pins = wheels.read_pins(Path(repo_root) / "requirements.txt")
+    pins = wheels.read_pins_by_python(repo_root, python_versions)
     log(f"collecting wheels for {', '.join(platforms)} (cache: {cache_dir})")
     wheel_paths, notes = wheels.collect(pins, platforms, list(python_versions), cache_dir, log)
     t_wheels = time.perf_counter()

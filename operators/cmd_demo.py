@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..core.tracking import TrackingSettings
 from .cmd_evaluate import evaluate
-from .cmd_track import Progress, open_subject, run_session
+from .cmd_track import Progress, StepPrinter, open_subject, run_session
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_scenes"
 DEMO_FRAMES = 30
@@ -47,7 +47,7 @@ def run(args):
     t0 = time.perf_counter()
     scene = open_subject(capture / "subject.blend")
     session = TrackSession(scene, find_armature(scene), capture, args.out, settings, frames=frames,
-                           log=lambda m: print(m, file=sys.stderr))
+                           log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
     run_session(session, Progress(session.n_total))
     written = session.finish()
     summary, plot = evaluate(args.out, capture / "gt_joints.npz")

@@ -64,19 +64,39 @@ def add_arguments(p):
 
 
 class Progress:
-    """`frame k of n, energy, s/frame, time left` on stderr."""
+    """`frame k of n, energy, s/frame, time left` on stderr, one line per frame. Time left = frames left x
+    the last five frames' mean (the first frame's whole-body search is left out once others are in)."""
 
     def __init__(self, total, done=0):
         self.total, self.done, self.start = total, done, time.perf_counter()
-        self.solved_here = 0
+        self.seconds = []
 
     def __call__(self, est):
         self.done += 1
-        self.solved_here += 1
-        rate = (time.perf_counter() - self.start) / self.solved_here
-        left = rate * (self.total - self.done)
+        self.seconds.append(est.seconds)
+        recent = self.seconds[1:][-5:] or self.seconds[-1:]
+        left = sum(recent) / len(recent) * (self.total - self.done)
         print(f"frame {self.done} of {self.total} (capture frame {est.frame}): energy {est.energy:.4f}, "
               f"{est.seconds:.2f} s/frame, about {left / 60:.1f} min left", file=sys.stderr, flush=True)
+
+
+class StepPrinter:
+    """The one-off preparation on stderr: one line per step, and one per 10 % within a step."""
+
+    def __init__(self):
+        self.last = None
+        self.start = None
+
+    def __call__(self, text, fraction):
+        if self.start is None:
+            self.start = time.perf_counter()
+        if text is None:
+            print(f"preparing: done in {time.perf_counter() - self.start:.1f} s", file=sys.stderr, flush=True)
+            return
+        key = (text, int(10 * fraction))
+        if key != self.last:
+            self.last = key
+            print(f"preparing (once per rig): {text}, {100 * fraction:.0f} %", file=sys.stderr, flush=True)
 
 
 def open_subject(scene_path):
@@ -109,7 +129,7 @@ def run(args):
         armature = find_armature(scene, args.armature)
         session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args),
                                frames=parse_frames(args.frames), resume=args.resume,
-                               log=lambda m: print(m, file=sys.stderr))
+                               log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
     except (SubjectError, ValueError, FileNotFoundError) as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2

@@ -37,36 +37,58 @@ def _resolve_range(armature_obj, frame_range):
     return start, end
 
 
+def _view_layer(context, scene):
+    """The view layer to export from: the context's when it belongs to `scene`, else the scene's first.
+
+    In `blender --background FILE --command ...` (and in timers) the context may hold no window, no
+    view layer and no active object, so nothing here relies on them being set."""
+    view_layer = getattr(context, "view_layer", None)
+    if view_layer is None or scene is None or view_layer.name not in scene.view_layers \
+            or scene.view_layers[view_layer.name] != view_layer:
+        view_layer = scene.view_layers[0]
+    return view_layer
+
+
 @contextmanager
-def _export_state(context, objects, active, frame_range):
-    """Object mode, only `objects` selected, `active` active, scene range = frame_range; restored after."""
-    scene, view_layer = context.scene, context.view_layer
-    previous_mode = None
-    if context.mode != "OBJECT" and view_layer.objects.active is not None:
-        previous_mode = view_layer.objects.active.mode
-        bpy.ops.object.mode_set(mode="OBJECT")
-    selected = [o for o in view_layer.objects if o.select_get()]
+def _export_state(context, objects, active, frame_range, scene=None):
+    """Object mode, only `objects` selected, `active` active, scene range = frame_range; restored after.
+
+    Yields a dict of context members for `context.temp_override(**members)`: Blender's exporters read
+    `context.object` / `context.selected_objects` in their poll and execute, which are missing in a
+    `--command` run, so the exporter call is made under an override naming them explicitly."""
+    scene = scene or context.scene
+    view_layer = _view_layer(context, scene)
     previous_active = view_layer.objects.active
+    previous_mode = None
+    if previous_active is not None and previous_active.mode != "OBJECT":
+        previous_mode = previous_active.mode
+        with context.temp_override(scene=scene, view_layer=view_layer, active_object=previous_active,
+                                   object=previous_active):
+            bpy.ops.object.mode_set(mode="OBJECT")
+    selected = [o for o in view_layer.objects if o.select_get(view_layer=view_layer)]
     previous_range = (scene.frame_start, scene.frame_end, scene.frame_current)
     try:
         for o in selected:
-            o.select_set(False)
+            o.select_set(False, view_layer=view_layer)
         for o in objects:
             if o.name not in view_layer.objects:
                 raise ExportError(f"{o.name!r} is not in the view layer {view_layer.name!r}; "
                                   f"include its collection to export it")
-            o.select_set(True)
+            o.select_set(True, view_layer=view_layer)
         view_layer.objects.active = active
         scene.frame_start, scene.frame_end = frame_range
-        yield
+        yield dict(scene=scene, view_layer=view_layer, active_object=active, object=active,
+                   selected_objects=list(objects), selected_editable_objects=list(objects))
     finally:
         scene.frame_start, scene.frame_end = previous_range[:2]
         scene.frame_set(previous_range[2])
         for o in view_layer.objects:
-            o.select_set(o in selected)
+            o.select_set(o in selected, view_layer=view_layer)
         view_layer.objects.active = previous_active
-        if previous_mode is not None and previous_active is not None:
-            bpy.ops.object.mode_set(mode=previous_mode)
+        if previous_mode is not None:
+            with context.temp_override(scene=scene, view_layer=view_layer, active_object=previous_active,
+                                       object=previous_active):
+                bpy.ops.object.mode_set(mode=previous_mode)
 
 
 def _prepare_path(path):
@@ -76,12 +98,14 @@ def _prepare_path(path):
 
 
 def export_fbx(context, armature_obj, path, frame_range=None, include_mesh=True,
-               scale_options="FBX_SCALE_UNITS", global_scale=1.0):
+               scale_options="FBX_SCALE_UNITS", global_scale=1.0, scene=None):
     """Write the armature (and the meshes skinned to it) with its animation baked on every frame."""
     start, end = _resolve_range(armature_obj, frame_range)
     path = _prepare_path(path)
-    objects = [armature_obj] + (skinned_meshes(armature_obj, context.scene) if include_mesh else [])
-    with _export_state(context, objects, armature_obj, (start, end)):
+    scene = scene or context.scene
+    objects = [armature_obj] + (skinned_meshes(armature_obj, scene) if include_mesh else [])
+    with _export_state(context, objects, armature_obj, (start, end), scene) as members, \
+            context.temp_override(**members):
         bpy.ops.export_scene.fbx(
             filepath=str(path), use_selection=True, object_types={"ARMATURE", "MESH"},
             global_scale=global_scale, apply_unit_scale=True, apply_scale_options=scale_options,
@@ -104,11 +128,12 @@ def bvh_transform_warning(armature_obj):
             f"match the world")
 
 
-def export_bvh(context, armature_obj, path, frame_range=None, global_scale=1.0):
+def export_bvh(context, armature_obj, path, frame_range=None, global_scale=1.0, scene=None):
     """Write the armature's animation as BVH (Blender axes: Z up; BVH has no axis option)."""
     start, end = _resolve_range(armature_obj, frame_range)
     path = _prepare_path(path)
-    with _export_state(context, [armature_obj], armature_obj, (start, end)):
+    with _export_state(context, [armature_obj], armature_obj, (start, end), scene) as members, \
+            context.temp_override(**members):
         bpy.ops.export_anim.bvh(filepath=str(path), frame_start=start, frame_end=end, global_scale=global_scale,
                                 rotate_mode="NATIVE", root_transform_only=False)
     return path

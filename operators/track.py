@@ -48,10 +48,11 @@ def output_folder(context):
     return Path(bpy.path.abspath(folder))
 
 
-def build_session(context, log=None):
+def build_session(context, log=None, step=None):
     """Read the scene's settings and construct the tracking session (main thread).
 
-    `log(message)` receives the session's progress messages; it may be called from any thread.
+    `log(message)` receives the session's messages, `step(text, fraction)` its one-off preparation
+    (text None when it is over); both may be called from any thread.
     """
     from ..addon.preferences import effective_backend
     from .setup_subject import subject_armature
@@ -64,7 +65,7 @@ def build_session(context, log=None):
     settings.backend = effective_backend(context, props.backend)
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
     return _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
-                            frames=props.frame_range(), resume=props.resume, log=log,
+                            frames=props.frame_range(), resume=props.resume, log=log, step=step,
                             units=None if props.units == "auto" else props.units)
 
 
@@ -83,7 +84,8 @@ class TrackJob:
         self.error = None  # text naming what failed, or None
         self.cancelled = False
         self.done = False
-        self.status = ""
+        self.status = ""  # the session's latest message; shown until the next frame arrives
+        self.step = None  # (text, fraction) of the one-off preparation while it runs
         self.out_dir = None
         self.started = time.perf_counter()
         self._done_before = 0
@@ -92,6 +94,9 @@ class TrackJob:
     # ---- progress relay: the session may call this from any thread
     def report_progress(self, *args, **_kwargs):
         self.queue.put(("status", " ".join(str(a) for a in args)))
+
+    def report_step(self, text, fraction=0.0):
+        self.queue.put(("step", text, float(fraction)))
 
     def _attach(self, session):
         self.session = session
@@ -108,6 +113,18 @@ class TrackJob:
     @property
     def seconds_per_frame(self):
         return sum(e.seconds for e in self.estimates) / len(self.estimates) if self.estimates else 0.0
+
+    @property
+    def recent_seconds_per_frame(self):
+        """Mean time of the last five frames; the first frame's whole-body search leaves it once later
+        frames are in (it takes several times longer than a tracked frame)."""
+        recent = self.estimates[1:][-5:] or self.estimates[-1:]
+        return sum(e.seconds for e in recent) / len(recent) if recent else 0.0
+
+    @property
+    def seconds_left(self):
+        left = max(0, self._total - self._done_before - len(self.estimates))
+        return left * self.recent_seconds_per_frame
 
     # ---- threaded run
     def start(self, session):
@@ -141,6 +158,8 @@ class TrackJob:
                     new.append(message[1])
             elif kind == "status":
                 self.status = message[1]
+            elif kind == "step":
+                self.step = None if message[1] is None else (message[1], min(1.0, max(0.0, message[2])))
             elif kind == "error":
                 self._fail(message[1], message[2])
             elif kind == "done":
@@ -156,6 +175,7 @@ class TrackJob:
             self.request_cancel()
             return False
         self.estimates.append(estimate)
+        self.status, self.step = "", None  # a message belongs to the moment it was sent, not to every later frame
         return True
 
     def _fail(self, message, details):
@@ -192,13 +212,29 @@ class TrackJob:
         return self.session.finish(export=export)
 
 
+def _duration(seconds):
+    seconds = int(round(seconds))
+    return f"{seconds // 60} min {seconds % 60:02d} s" if seconds >= 60 else f"{seconds} s"
+
+
 def _status_line(job):
-    text = f"Tracking frame {job._done_before + len(job.estimates)}/{job._total}"
-    if job.estimates:
-        text += f", {job.seconds_per_frame:.1f} s/frame, energy {job.estimates[-1].energy:.3g}"
-    if job.status:
-        text += f" - {job.status}"
-    return text
+    """One line for the current moment: the preparation step while it runs, else the frame count."""
+    done = job._done_before + len(job.estimates)
+    if job.step is not None and not job.estimates:
+        text, fraction = job.step
+        return f"Preparing (once per rig): {text}, {100 * fraction:.0f} %"
+    if not job.estimates:
+        line = f"Frame {done + 1} of {job._total}: solving"
+        if done == job._done_before:
+            line += " (the first frame searches the whole body)"
+    elif len(job.estimates) == 1 and job._done_before == 0 and done < job._total:
+        # the first frame's whole-body search says nothing about the tracked frames' pace
+        line = (f"Frame 1 of {job._total}, {job.estimates[0].seconds:.1f} s (the first frame's whole-body "
+                f"search); time left after frame 2")
+    else:
+        line = (f"Frame {done} of {job._total}, {job.recent_seconds_per_frame:.1f} s/frame, "
+                f"about {_duration(job.seconds_left)} left")
+    return f"{line} - {job.status}" if job.status else line
 
 
 class MOCAP_OT_track(bpy.types.Operator):
@@ -218,7 +254,7 @@ class MOCAP_OT_track(bpy.types.Operator):
         props = context.scene.mocap
         props.last_error = ""
         try:
-            session = build_session(context, log=job.report_progress)
+            session = build_session(context, log=job.report_progress, step=job.report_step)
             if props.resume and hasattr(session, "key_all"):
                 session.key_all()  # frames solved by the earlier run get their keys back
         except (ValueError, OSError) as exc:
@@ -241,7 +277,8 @@ class MOCAP_OT_track(bpy.types.Operator):
 
     def _show(self, context, job):
         props = context.scene.mocap
-        props.progress = job.fraction
+        props.preparing = job.step is not None and not job.estimates and not job.done
+        props.progress = job.step[1] if props.preparing else job.fraction
         props.frames_solved = job._done_before + len(job.estimates)  # a resumed run counts the earlier frames
         props.frames_total = job._total
         props.seconds_per_frame = job.seconds_per_frame
@@ -250,6 +287,7 @@ class MOCAP_OT_track(bpy.types.Operator):
     def _end(self, context, job):
         props = context.scene.mocap
         props.is_tracking = False  # before finish(): it saves tracked.blend
+        props.preparing = False
         summary = None
         try:
             summary = job.finish()

@@ -18,12 +18,12 @@ from ..core.results import ResultWriter
 from ..core.tracking import Tracker, TrackingSettings
 
 
-def build_motion_models(body, capture_folder, fps, seed=0):
+def build_motion_models(body, capture_folder, fps, seed=0, progress=None):
     """Anatomical prior + AR(3) dynamics from the bundled CMU clips, leaving out the clip window a
     bundled sample scene was made from."""
     from ..core.motion_library import build_motion_models as build, scene_exclusion
 
-    return build(body, fps=fps, exclude=scene_exclusion(capture_folder), seed=seed)
+    return build(body, fps=fps, exclude=scene_exclusion(capture_folder), seed=seed, progress=progress)
 
 
 def _blender_version():
@@ -34,11 +34,14 @@ def _blender_version():
 
 class TrackSession:
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 mesh_obj=None, frame_offset=None, prior=None, log=None, units=None):
+                 mesh_obj=None, frame_offset=None, prior=None, log=None, units=None, step=None):
         self.scene = scene
         self.armature = armature_obj
         self.settings = settings or TrackingSettings()
         self.log = log or (lambda msg: None)
+        # step(text, fraction): the one-off preparation before the first frame, as its own step;
+        # step(None, 1.0) when it is over. May be called from the worker thread.
+        self.step = step or (lambda text, fraction: None)
         self.body = scene_bridge.body_from_blender(armature_obj, mesh_obj, scene)
         self.capture = load_capture(capture_dir, units=units)
         if resolve_weights(self.settings.likelihood).needs_learned_evidence:
@@ -72,11 +75,15 @@ class TrackSession:
         """Build the prior, dynamics and tracker (engine only; safe off the main thread)."""
         if self.tracker is not None:
             return self.tracker
+        step = self.step
         if self.prior is None:
-            self.log("preparing the anatomical prior and dynamics for this rig (cached after the first run)")
-            self.prior, self.dynamics = build_motion_models(self.body, self.capture_dir, self.capture.frames.fps,
-                                                            self.settings.seed)
+            step("anatomical prior and dynamics for this rig (cached after the first run)", 0.0)
+            self.prior, self.dynamics = build_motion_models(
+                self.body, self.capture_dir, self.capture.frames.fps, self.settings.seed,
+                progress=lambda fraction, text: step(text, 0.85 * fraction))
+        step("tracker: background models and likelihood", 0.85)
         self.tracker = Tracker(self.body, self.capture, self.settings, prior=self.prior, dynamics=self.dynamics)
+        step(None, 1.0)
         self.writer.info["energy_scale"] = self.tracker.scale
         self.writer.info["refine_scale"] = self.tracker.refine_scale if self.tracker.refines else None
         if self._resume_state is not None:
@@ -140,8 +147,8 @@ class TrackSession:
 
             import bpy
 
-            export_bvh(bpy.context, self.armature, out / "animation.bvh", frames)
-            export_fbx(bpy.context, self.armature, out / "animation.fbx", frames)
+            export_bvh(bpy.context, self.armature, out / "animation.bvh", frames, scene=self.scene)
+            export_fbx(bpy.context, self.armature, out / "animation.fbx", frames, scene=self.scene)
             written.update(bvh=out / "animation.bvh", fbx=out / "animation.fbx")
         if save_blend:
             import bpy

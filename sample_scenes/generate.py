@@ -530,6 +530,11 @@ def save_subject_blend(data, path, hips_world0, yaw0, rng, colours=None, offset=
     bpy.context.scene.render.fps = int(round(fps))
     path.parent.mkdir(parents=True, exist_ok=True)
     bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True)
+    # The version-neutral source: this bpy's .blend does not open in older Blenders, so subject.blend is
+    # rebuilt from it by the oldest Blender at hand (tests/real_blender/stage.sh --resave-subjects).
+    sys.path.insert(0, str(REPO / "tools"))
+    import portable_subject
+    portable_subject.save_source(portable_subject.dump(), path.with_name("subject_source.json.gz"))
     return dict(offset_m=offset.tolist(), offset_norm_m=float(np.linalg.norm(offset)),
                 yaw_error_deg=math.degrees(dyaw), armature_matrix_world=M.tolist())
 

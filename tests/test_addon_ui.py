@@ -92,6 +92,44 @@ def test_blender_command_tracks_the_open_file(addon_module_name, bpy_module, tmp
     assert arm.animation_data is not None and arm.animation_data.action is not None  # keyed in the open file
 
 
+RESULT_FILES = ("joints.npz", "poses.npz", "report.json", "animation.bvh", "animation.fbx", "tracked.blend")
+
+
+def test_blender_command_with_no_active_object_writes_every_result_file(addon_module_name, bpy_module, tmp_path):
+    """A real `blender -b FILE --command markerless_mocap track` has no `context.object`: Blender's BVH
+    exporter polls on it and refused to run (issue 14). Same state here: nothing selected, nothing active,
+    and the context masks `object` (setting the view layer's active object does not bring it back, as in
+    `--command`). The command must still write every result file, exports and overlays included."""
+    from conftest import SAMPLE_SCENES
+
+    bpy = bpy_module
+    walk = SAMPLE_SCENES / "walk"
+    bpy.ops.wm.open_mainfile(filepath=str(walk / "subject.blend"))
+    view_layer = bpy.context.view_layer
+    for o in view_layer.objects:
+        o.select_set(False)
+    view_layer.objects.active = None
+    no_object = dict(object=None, active_object=None, selected_objects=[], selected_editable_objects=[])
+    operators = _module(addon_module_name, "operators")
+    assert operators._cli_handle is not None and operators.CLI_NAME == "markerless_mocap"
+    cli = _module(addon_module_name, "operators.cli")  # the function registered under that name
+    out = tmp_path / "result"
+    with bpy.context.temp_override(**no_object):
+        view_layer.objects.active = next(o for o in view_layer.objects if o.type == "ARMATURE")
+        assert bpy.context.object is None and not bpy.ops.export_anim.bvh.poll()  # the state that failed
+        view_layer.objects.active = None
+        code = cli.blender_command(["track", "--capture", str(walk), "--out", str(out), "--frames", "0-1",
+                                    "--particles", "20", "--iterations", "3"])
+    assert code == 0
+    for name in RESULT_FILES:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    overlays = sorted(p.name for p in (out / "overlay").glob("*.mp4"))
+    assert len(overlays) == 4, overlays
+    bvh = (out / "animation.bvh").read_text()
+    assert "Frames: 2" in bvh
+    assert bpy.context.view_layer.objects.active is None  # the user's selection state is given back
+
+
 # ----------------------------------------------------------------------------- panels
 class _FakeLayout:
     """Stands in for UILayout in background mode and checks what the panels ask it to draw."""
@@ -232,8 +270,9 @@ class FakeSession:
     block_at = None  # index of the frame whose solve waits for `release`
 
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 log=None, units=None):
+                 log=None, units=None, step=None):
         FakeSession.last = self
+        self.step = step or (lambda text, fraction: None)
         self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume,
                          units=units)
         self.scene, self.armature = scene, armature_obj
@@ -256,6 +295,10 @@ class FakeSession:
         if index == self.block_at:
             self.blocked.set()
             assert self.release.wait(10)
+        if index == 0:  # the real session's one-off preparation, before the first frame
+            self.step("fake preparation", 0.0)
+            self.step("fake preparation", 0.5)
+            self.step(None, 1.0)
         frame = self.frames[index]
         self.solved.append(frame)
         return Estimate(frame, np.array([frame / 10.0]), np.zeros((1, 3)), 1.0 / (1 + frame), 0.01, 3000)
@@ -316,6 +359,100 @@ def test_track_execute_keys_every_frame_and_finishes(fake_track):
     assert m.seconds_per_frame == pytest.approx(0.01)
 
 
+def test_status_is_one_line_per_frame_and_the_preparation_its_own_step(fake_track):
+    """Issue 14: the first message stayed appended to every later frame's status, and the one-off
+    preparation (about 45 s on a new rig) showed no progress. Now: the preparation is a step with its
+    percentage and its own bar; each frame's line is 'Frame k of n, s/frame, time left' and nothing else."""
+    import re
+
+    bpy, track, _arm, _compat, tmp_path = fake_track
+    m = bpy.context.scene.mocap
+    job = track.TrackJob()
+    session = FakeSession(bpy.context.scene, _arm, tmp_path, tmp_path, frames=[0, 1, 2, 3],
+                          log=job.report_progress, step=job.report_step)
+    job._attach(session)
+    m.is_tracking = True
+    shown = []
+
+    def show():
+        job.drain()
+        track.MOCAP_OT_track._show(None, bpy.context, job)
+        shown.append((m.status, m.preparing, round(m.progress, 3)))
+        log = _draw_all(bpy)
+        return [entry for entry in log if entry[0] == "progress"]
+
+    show()
+    assert shown[-1][0] == "Frame 1 of 4: solving (the first frame searches the whole body) - fake session ready"
+    job.report_step("anatomical prior and dynamics for this rig", 0.4)
+    bars = show()
+    assert shown[-1] == ("Preparing (once per rig): anatomical prior and dynamics for this rig, 40 %", True, 0.4)
+    assert bars == [("progress", pytest.approx(0.4), "Preparing 40 %")]
+    for k in range(1, 5):
+        estimate = session.solve_next()
+        job.queue.put(("frame", estimate))
+        bars = show()
+        status, preparing, progress = shown[-1]
+        if k == 1:
+            assert status == "Frame 1 of 4, 0.0 s (the first frame's whole-body search); time left after frame 2"
+        else:
+            assert re.fullmatch(rf"Frame {k} of 4, 0\.0 s/frame, about \d+ s left", status), status
+        assert not preparing and progress == pytest.approx(k / 4)
+        assert bars == [("progress", pytest.approx(k / 4), f"{k}/4 frames")]
+    assert shown[-1][0] == "Frame 4 of 4, 0.0 s/frame, about 0 s left"
+    # a message sent later is shown with the next line only, then dropped
+    job.report_progress("limb search: left arm")
+    show()
+    assert shown[-1][0].endswith(" - limb search: left arm")
+    m.is_tracking = False
+
+
+def test_time_left_uses_the_recent_frames_not_the_first_search(fake_track):
+    _bpy, track, _arm, _compat, tmp_path = fake_track
+    job = track.TrackJob()
+    job._attach(FakeSession(None, None, tmp_path, tmp_path, frames=list(range(10))))
+    job.estimates.append(Estimate(0, None, None, 0.0, 60.0, 0))
+    assert track._status_line(job) == ("Frame 1 of 10, 60.0 s (the first frame's whole-body search); "
+                                       "time left after frame 2")  # not 9 x 60 s
+    job.estimates.clear()
+    for frame, seconds in enumerate((60.0, 2.0, 4.0)):
+        job.estimates.append(Estimate(frame, None, None, 0.0, seconds, 0))
+    assert job.seconds_left == pytest.approx(7 * 3.0)
+    assert track._status_line(job) == "Frame 3 of 10, 3.0 s/frame, about 21 s left"  # 7 x 3 s, not 7 x 22 s
+    job.estimates.append(Estimate(3, None, None, 0.0, 100.0, 0))
+    assert track._status_line(job) == "Frame 4 of 10, 35.3 s/frame, about 3 min 32 s left"  # 6 x (2+4+100)/3
+
+
+def test_session_reports_its_preparation_as_steps(monkeypatch, tmp_path):
+    """The real TrackSession: the motion models' progress arrives as (text, fraction) steps, rising, then
+    (None, 1.0) once the tracker is built; the cheap motion-library callback is real, the model fit faked."""
+    from markerless_mocap.core import motion_library
+    from markerless_mocap.operators import track_session
+
+    calls = []
+
+    def fake_build(body, capture_folder, fps, seed=0, progress=None):
+        for i in range(3):
+            progress(i / 3, f"mapping motion clip {i + 1} of 3 onto the rig")
+        progress(0.9, "fitting the anatomical prior and the dynamics")
+        raise _Stop
+
+    class _Stop(Exception):
+        pass
+
+    session = track_session.TrackSession.__new__(track_session.TrackSession)
+    session.tracker, session.prior = None, None
+    session.body, session.capture_dir, session.settings = None, tmp_path, type("S", (), {"seed": 0})()
+    session.capture = type("C", (), {"frames": type("F", (), {"fps": 30.0})()})()
+    session.step = lambda text, fraction: calls.append((text, fraction))
+    monkeypatch.setattr(track_session, "build_motion_models", fake_build)
+    with pytest.raises(_Stop):
+        session.prepare()
+    fractions = [f for _t, f in calls]
+    assert calls[0][0].startswith("anatomical prior and dynamics") and fractions == sorted(fractions)
+    assert calls[-1] == ("fitting the anatomical prior and the dynamics", pytest.approx(0.85 * 0.9))
+    assert motion_library.build_motion_models.__code__.co_varnames.count("progress") == 1
+
+
 def test_track_resume_rekeys_earlier_frames_and_counts_them(fake_track):
     bpy, _, arm, compat, _ = fake_track
     m = bpy.context.scene.mocap
@@ -371,7 +508,7 @@ def test_threaded_job_cancel_keeps_solved_frames(fake_track, monkeypatch):
     session = track.build_session(bpy.context, log=job.report_progress)
     job.start(session)
     _drain_until(job, lambda: len(job.estimates) == 1 and session.blocked.is_set())
-    assert job.status == "fake session ready"
+    assert job.status == ""  # the session's first message went with the first frame (it used to stick)
     assert job.fraction == pytest.approx(1 / 3)
     job.request_cancel()  # Esc while frame 1 is being solved: it completes, frame 2 never starts
     session.release.set()

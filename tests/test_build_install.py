@@ -1,6 +1,9 @@
-"""The installable zip: build it for linux-x64 (wheels from dist/wheels-cache, else PyPI once per
-machine), check what is inside, install it into a fresh bpy process, restart, and use the bundled
-cv2/scipy/numba from the extension's own site-packages."""
+"""The installable zip: build it for linux-x64 with cp311 and cp313 wheels (from dist/wheels-cache, else
+PyPI once per machine), check what is inside, install it into a fresh bpy process, restart, and use the
+bundled cv2/scipy/numba from the extension's own site-packages.
+
+`bash setup.sh test` runs this file on bpy 5.0.1 (Python 3.11, .venv) and again on bpy 5.2.3 (Python
+3.13, .venv313): the same zip must install and work in both."""
 import hashlib
 import importlib.util
 import json
@@ -27,8 +30,10 @@ PROBE = REPO / "tools" / "install_probe.py"
 HAVE_BPY = importlib.util.find_spec("bpy") is not None
 needs_bpy = pytest.mark.skipif(not HAVE_BPY, reason="bpy (and its extension builder) is not installed")
 
-# Pins the zip must carry (numpy is Blender's own and must not be bundled).
-PINS = wheels.read_pins(REPO / "requirements.txt")
+# Pins the zip must carry for the Python running the tests (numpy is Blender's own, never bundled).
+RUNNING_PYTHON = tuple(sys.version_info[:2])
+PINS = wheels.read_pins(wheels.requirements_file(REPO, RUNNING_PYTHON))
+PINS_BY_PYTHON = wheels.read_pins_by_python(REPO, wheels.DEFAULT_PYTHON_VERSIONS)
 EXPECTED_DISTS = {"opencv-contrib-python-headless", "scipy", "numba", "llvmlite"}
 
 
@@ -76,18 +81,24 @@ def test_zip_lists_exactly_the_wheels_it_carries(build):
     in_zip = {n for n in names if n.endswith(".whl")}
     assert {w[2:] for w in listed} == in_zip
     assert manifest["platforms"] == [PLATFORM]
-    dists = {}
-    for w in in_zip:
-        name, version, _, _ = wheels.parse_wheel_filename(Path(w).name)
-        assert name not in dists, f"two wheels of {name} for one platform: {in_zip}"
-        dists[name] = str(version)
-        assert wheels.wheel_fits(Path(w).name, PLATFORM, (3, 11)), w
-    assert set(dists) == EXPECTED_DISTS, "numpy must not be bundled; cv2/scipy/numba/llvmlite must"
-    for name in ("opencv-contrib-python-headless", "scipy", "numba"):
-        assert dists[name] == PINS[name]
-    # llvmlite is numba's dependency: the version the tests here run with
-    from importlib.metadata import version
-    assert dists["llvmlite"] == version("llvmlite")
+    assert wheels.DEFAULT_PYTHON_VERSIONS == ((3, 11), (3, 13))
+    for python in wheels.DEFAULT_PYTHON_VERSIONS:  # Blender 4.2-5.0 and Blender 5.1-5.2
+        dists = {}
+        for w in in_zip:
+            if not wheels.wheel_fits(Path(w).name, PLATFORM, python):
+                continue
+            name, version, _, _ = wheels.parse_wheel_filename(Path(w).name)
+            assert name not in dists, f"two wheels of {name} for Python {python}: {in_zip}"
+            dists[name] = str(version)
+        assert set(dists) == EXPECTED_DISTS, f"Python {python}: numpy must not be bundled; cv2/scipy/numba/llvmlite must"
+        for name in ("opencv-contrib-python-headless", "scipy", "numba"):
+            assert dists[name] == PINS_BY_PYTHON[python][name], (python, name)
+        if python == RUNNING_PYTHON:  # llvmlite is numba's dependency: the version the tests here run with
+            from importlib.metadata import version
+            assert dists["llvmlite"] == version("llvmlite")
+    assert all(any(wheels.wheel_fits(Path(w).name, PLATFORM, py) for py in wheels.DEFAULT_PYTHON_VERSIONS)
+               for w in in_zip), "a wheel no supported Blender would install"
+    print(f"linux-x64 zip: {build['zip'].stat().st_size / 1e6:.1f} MB")
 
 
 @pytest.mark.slow
@@ -156,6 +167,18 @@ def test_install_enables_the_addon_and_registers_every_operator(installed):
         assert report["registered_classes"] == installed["classes"], phase
         assert len(report["mocap_ops"]) >= len(installed["classes"]), phase
     assert installed["install"]["install_result"] == ["FINISHED"]
+    assert installed["install"]["blender"].startswith(str(PINS["bpy"]))  # 5.0.1 in .venv, 5.2.3 in .venv313
+
+
+def test_manifest_covers_every_blender_the_wheels_serve():
+    """4.2 LTS to 5.2 LTS: the version range, and one requirements file per Blender Python version."""
+    manifest = tomllib.loads((REPO / "blender_manifest.toml").read_text())
+    as_tuple = lambda text: tuple(int(x) for x in text.split("."))
+    assert as_tuple(manifest["blender_version_min"]) <= (4, 2, 0)
+    bpy_pins = [as_tuple(pins["bpy"]) for pins in PINS_BY_PYTHON.values()]
+    assert bpy_pins == [(5, 0, 1), (5, 2, 3)]
+    assert all(pin < as_tuple(manifest["blender_version_max"]) for pin in bpy_pins)  # max is exclusive
+    assert as_tuple(manifest["blender_version_max"]) == (5, 3, 0)
 
 
 @pytest.mark.slow

@@ -20,7 +20,7 @@ def probe(mode, package_id, expected_classes, zip_path=None):
     import bpy  # first: addon_utils lives on the path bpy sets up
     import addon_utils
 
-    report = {"mode": mode, "errors": []}
+    report = {"mode": mode, "errors": [], "blender": bpy.app.version_string}
     if mode == "install":
         result = bpy.ops.extensions.package_install_files(
             filepath=zip_path, repo="user_default", enable_on_install=True)

@@ -90,6 +90,26 @@ def parse_python_versions(text):
     return versions
 
 
+# Blender's Python versions the zip serves, each with the requirements file that pins its wheels:
+# 3.11 for Blender 4.2-5.0 (numpy 1.26), 3.13 for Blender 5.1-5.2 (numpy 2.x).
+REQUIREMENTS_FOR_PYTHON = {(3, 11): "requirements.txt", (3, 13): "requirements-py313.txt"}
+DEFAULT_PYTHON_VERSIONS = tuple(REQUIREMENTS_FOR_PYTHON)
+
+
+def requirements_file(repo_root, python_version):
+    name = REQUIREMENTS_FOR_PYTHON.get(tuple(python_version))
+    if name is None:
+        known = ", ".join(f"{a}.{b}" for a, b in REQUIREMENTS_FOR_PYTHON)
+        raise BuildInputError(f"no requirements file pins the wheels for Python {python_version[0]}."
+                              f"{python_version[1]}: the build knows {known}")
+    return Path(repo_root) / name
+
+
+def read_pins_by_python(repo_root, python_versions):
+    """{(major, minor): pins} from each Python version's requirements file."""
+    return {tuple(v): read_pins(requirements_file(repo_root, v)) for v in python_versions}
+
+
 def read_pins(requirements_path):
     """{canonical name: version} for every `name==version` line of requirements.txt."""
     path = Path(requirements_path)
@@ -232,13 +252,16 @@ def _installed_version(name):
 def collect(pins, platforms, python_versions, cache_dir, log=print):
     """All wheels to bundle, as cache paths, with their dependencies; downloads what is missing.
 
+    pins: {name: version} for every Python version, or {(major, minor): {name: version}} per version.
     Returns (wheels, notes): notes are warnings for the user (e.g. a Blender-provided package
     whose version a wheel does not accept)."""
     wheels, notes = [], []
+    per_python = bool(pins) and all(isinstance(k, tuple) for k in pins)
     for platform in platforms:
         for python_version in python_versions:
+            version_pins = pins[tuple(python_version)] if per_python else pins
             env = _marker_env(platform, python_version)
-            queue = [(n, SpecifierSet(f"=={pins[canonicalize_name(n)]}")) for n in BUNDLED]
+            queue = [(n, SpecifierSet(f"=={version_pins[canonicalize_name(n)]}")) for n in BUNDLED]
             seen = set()
             while queue:
                 name, specifier = queue.pop(0)
@@ -254,10 +277,11 @@ def collect(pins, platforms, python_versions, cache_dir, log=print):
                         continue
                     dep = canonicalize_name(req.name)
                     if dep in PROVIDED_BY_BLENDER:
-                        have = _installed_version(dep)
+                        have = version_pins.get(dep) if per_python else _installed_version(dep)
                         if have and Version(have) not in req.specifier:
-                            notes.append(f"{path.name} wants {req.name}{req.specifier}, but {have} is installed here")
+                            notes.append(f"{path.name} wants {req.name}{req.specifier}, but {have} is "
+                                         f"{'pinned for it' if per_python else 'installed here'}")
                         continue
-                    queue.append((req.name, _pin_for(req, pins)))
+                    queue.append((req.name, _pin_for(req, version_pins)))
     unique = sorted(set(wheels), key=lambda p: p.name)
     return unique, sorted(set(notes))

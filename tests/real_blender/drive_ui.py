@@ -1,0 +1,215 @@
+"""Run by the real-Blender stage in the UI (under Xvfb):
+
+    blender SUBJECT.blend --enable-event-simulate --python drive_ui.py -- CAPTURE OUT
+
+Drives the Mocap sidebar the way a user would, through operators and timers: Import the capture, Check
+the rig, Track (the modal operator, a few frames), Esc to cancel (a simulated key press, as a user's
+would arrive), then Export FBX and BVH. Takes a screenshot at each step into OUT, writes OUT/ui_report.json
+and quits; the stage checks the report. Everything here runs on Blender's main thread (timers).
+"""
+import json
+import subprocess
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import bpy
+
+CAPTURE, OUT = (Path(p) for p in sys.argv[sys.argv.index("--") + 1:][:2])
+OUT.mkdir(parents=True, exist_ok=True)
+report = {"blender": bpy.app.version_string, "steps": [], "status_lines": [], "errors": [], "screenshots": []}
+state = {"t0": time.perf_counter(), "ticks": [], "step": 0}
+
+
+def log(message):
+    stamp = time.perf_counter() - state["t0"]
+    print(f"STAGE-UI {stamp:6.1f}s {message}", flush=True)
+    report["steps"].append(f"{stamp:.1f}s {message}")
+
+
+def ui():
+    win = bpy.context.window_manager.windows[0]
+    area = max((a for a in win.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width * a.height)
+    region = next(r for r in area.regions if r.type == "WINDOW")
+    return win, area, region
+
+
+def override():
+    win, area, region = ui()
+    return bpy.context.temp_override(window=win, screen=win.screen, area=area, region=region,
+                                     scene=win.scene, view_layer=win.view_layer)
+
+
+def screenshot(name):
+    """The X display as the user sees it (ImageMagick; Blender's own screenshot reads a black front
+    buffer under Xvfb + llvmpipe)."""
+    path = OUT / f"{name}.png"
+    proc = subprocess.run(["import", "-window", "root", str(path)], capture_output=True, text=True, timeout=30)
+    if proc.returncode != 0:
+        raise RuntimeError(f"screenshot failed: {proc.stderr.strip()}")
+    report["screenshots"].append(path.name)
+    log(f"screenshot {path.name}")
+
+
+def props():
+    return bpy.context.window_manager.windows[0].scene.mocap
+
+
+def finish(code=0):
+    report["seconds"] = round(time.perf_counter() - state["t0"], 1)
+    ticks = state["ticks"]
+    gaps = [b - a for a, b in zip(ticks, ticks[1:])]
+    report["timer_ticks_while_tracking"] = len(ticks)
+    report["max_ui_gap_s"] = round(max(gaps), 2) if gaps else None
+    (OUT / "ui_report.json").write_text(json.dumps(report, indent=1))
+    log(f"done ({'ok' if not report['errors'] else 'errors'})")
+    bpy.ops.wm.quit_blender()
+
+
+def guarded(fn):
+    def run():
+        try:
+            return fn()
+        except Exception as exc:
+            report["errors"].append(f"{fn.__name__}: {type(exc).__name__}: {exc}")
+            traceback.print_exc()
+            finish(1)
+            return None
+    return run
+
+
+@guarded
+def step_setup():
+    win, area, _ = ui()
+    area.spaces.active.show_region_ui = True
+    m = props()
+    m.capture_dir = str(CAPTURE)
+    m.output_dir = str(OUT / "ui_result")
+    m.use_frame_range, m.frame_start, m.frame_end = True, 0, 29
+    m.particles, m.iterations = 30, 4
+    log("sidebar open; capture folder, output folder, frames 0-29, 30 x 4 set")
+    bpy.app.timers.register(step_tab, first_interval=0.5)
+
+
+@guarded
+def step_tab():
+    """Switch the sidebar to the Mocap tab as a user can: Ctrl+wheel over the tab strip cycles the tabs
+    (Region.active_panel_category is read-only in 4.3). Events are handled between timer calls: one step
+    per call until the tab is Mocap."""
+    win, area, _ = ui()
+    sidebar = next(r for r in area.regions if r.type == "UI")
+    state["tab_tries"] = state.get("tab_tries", 0) + 1
+    if sidebar.active_panel_category != "Mocap" and state["tab_tries"] <= 8:
+        x, y = sidebar.x + sidebar.width - 8, sidebar.y + sidebar.height // 2  # over the tab strip
+        win.event_simulate(type="MOUSEMOVE", value="NOTHING", x=x, y=y)
+        win.event_simulate(type="WHEELDOWNMOUSE", value="PRESS", x=x, y=y, ctrl=True)
+        return 0.3
+    report["sidebar_tab"] = sidebar.active_panel_category
+    log(f"sidebar tab: {sidebar.active_panel_category} after {state['tab_tries'] - 1} Ctrl+wheel steps")
+    bpy.app.timers.register(step_import, first_interval=0.5)
+
+
+@guarded
+def step_import():
+    with override():
+        result = bpy.ops.mocap.import_capture()
+    coll = bpy.data.collections.get("Mocap Cameras")
+    cams = sorted(o.name for o in coll.objects if o.type == "CAMERA") if coll else []
+    report["import"] = {"result": sorted(result), "cameras": cams}
+    log(f"Import Capture: {sorted(result)}, collection 'Mocap Cameras' with {len(cams)} cameras {cams}")
+    if cams:  # look through the first camera: its video is the background, the subject over it
+        win, area, _ = ui()
+        win.scene.camera = bpy.data.objects[cams[0]]
+        area.spaces.active.region_3d.view_perspective = "CAMERA"
+        with override():
+            bpy.ops.view3d.view_center_camera()
+    bpy.app.timers.register(step_check, first_interval=1.0)
+
+
+@guarded
+def step_check():
+    screenshot("01_imported")
+    with override():
+        result = bpy.ops.mocap.check_subject()
+    m = props()
+    report["check"] = {"result": sorted(result), "dofs": m.subject_dofs, "preset": m.subject_preset}
+    log(f"Check rig: {sorted(result)}, {m.subject_dofs} DOF, preset {m.subject_preset}")
+    bpy.app.timers.register(step_track, first_interval=1.0)
+
+
+@guarded
+def step_track():
+    screenshot("02_checked")
+    with override():
+        result = bpy.ops.mocap.track("INVOKE_DEFAULT")
+    report["track_invoke"] = sorted(result)
+    log(f"Track invoked: {sorted(result)}")
+    state["track_started"] = time.perf_counter()
+    bpy.app.timers.register(step_watch, first_interval=0.2)
+
+
+@guarded
+def step_watch():
+    """Runs every 0.2 s while the modal operator tracks: the UI must keep ticking."""
+    m = props()
+    state["ticks"].append(time.perf_counter())
+    if m.status and (not report["status_lines"] or report["status_lines"][-1] != m.status):
+        report["status_lines"].append(m.status)
+        log(f"status: {m.status}")
+    if m.frames_solved >= 2 and not state.get("seen_two"):
+        state["seen_two"] = True
+        return 0.3  # let the sidebar redraw with the new count first
+    if state.get("seen_two") and "04_tracking.png" not in report["screenshots"]:
+        screenshot("04_tracking")
+        report["keys_at_screenshot"] = m.frames_solved
+        return 1.0  # let the screenshot's frame pass, then press Esc
+    if "04_tracking.png" in report["screenshots"] and not state.get("esc_sent"):
+        win = bpy.context.window_manager.windows[0]
+        win.event_simulate(type="ESC", value="PRESS")
+        win.event_simulate(type="ESC", value="RELEASE")
+        state["esc_sent"] = time.perf_counter()
+        report["frames_at_esc"] = m.frames_solved
+        log(f"Esc pressed at {m.frames_solved} frames solved")
+        return 0.2
+    if state.get("esc_sent") and not m.is_tracking:
+        arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+        action = arm.animation_data.action if arm.animation_data else None
+        frames = set()
+        if action is not None:
+            curves = getattr(action, "fcurves", None)
+            if curves is None or len(curves) == 0:
+                from bpy_extras.anim_utils import action_get_channelbag_for_slot
+                curves = action_get_channelbag_for_slot(action, arm.animation_data.action_slot).fcurves
+            for fc in curves:
+                frames.update(int(k.co[0]) for k in fc.keyframe_points)
+        report["cancel"] = {"status": m.status, "frames_solved": m.frames_solved, "keyed_frames": sorted(frames),
+                            "seconds_after_esc": round(time.perf_counter() - state["esc_sent"], 1)}
+        log(f"cancelled: '{m.status}', keyed frames {sorted(frames)}")
+        bpy.app.timers.register(step_export, first_interval=0.5)
+        return None
+    if time.perf_counter() - state["track_started"] > 240:
+        raise TimeoutError("tracking did not reach 2 frames / did not stop within 240 s")
+    return 0.2
+
+
+@guarded
+def step_export():
+    screenshot("05_cancelled")
+    with override():
+        fbx = bpy.ops.mocap.export_fbx("EXEC_DEFAULT", filepath=str(OUT / "ui_export.fbx"))
+        bvh = bpy.ops.mocap.export_bvh("EXEC_DEFAULT", filepath=str(OUT / "ui_export.bvh"))
+    report["export"] = {"fbx": sorted(fbx), "bvh": sorted(bvh),
+                        "fbx_bytes": (OUT / "ui_export.fbx").stat().st_size if (OUT / "ui_export.fbx").exists() else 0,
+                        "bvh_bytes": (OUT / "ui_export.bvh").stat().st_size if (OUT / "ui_export.bvh").exists() else 0}
+    log(f"Export: FBX {sorted(fbx)}, BVH {sorted(bvh)}")
+    bpy.app.timers.register(step_end, first_interval=0.5)
+
+
+@guarded
+def step_end():
+    screenshot("06_exported")
+    finish(0)
+
+
+bpy.app.timers.register(step_setup, first_interval=2.0)
