@@ -43,11 +43,18 @@ class TrackSession:
         self.capture = load_capture(capture_dir, units=units)
         if resolve_weights(self.settings.likelihood).needs_learned_evidence:
             require_model()  # a clear error now, not a traceback at the first frame
-        n = self.capture.frames.n_frames
-        self.all_frames = list(range(n)) if frames is None else [f for f in frames if 0 <= f < n]
-        if not self.all_frames:
-            raise ValueError(f"no frames to track: the capture has frames 0-{n - 1}, asked for "
-                             f"{frames[0]}-{frames[-1]}" if frames else "the capture has no frames")
+        footage = self.capture.frames
+        try:
+            if frames is None:
+                self.all_frames = list(range(footage.n_frames))
+                note = footage.shorter_footage_note()
+                if note:
+                    self.log(f"warning: {note}")
+            else:
+                self.all_frames = footage.require_frames(frames)
+        except ValueError:
+            self.capture.close()
+            raise
         self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
         self.rough_pose = self.body.default_pose()  # the subject as the user placed it
         self.capture_dir = capture_dir
