@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -28,8 +27,10 @@ UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 _UNIT_ALIASES = {"m": "m", "meter": "m", "meters": "m", "metre": "m", "metres": "m",
                  "cm": "cm", "centimeter": "cm", "centimeters": "cm", "centimetre": "cm", "centimetres": "cm",
                  "mm": "mm", "millimeter": "mm", "millimeters": "mm", "millimetre": "mm", "millimetres": "mm"}
-# Camera centres further than this (in metres) from the origin suggest the units are wrong.
-_SUSPICIOUS_DISTANCE_M = 100.0
+# No capture room has cameras further apart than this, or all closer together than that: a spread
+# outside the two is a file in millimetres read as metres (x1000), or the other way round (/1000).
+LARGEST_CAMERA_SPREAD_M = 100.0
+SMALLEST_CAMERA_SPREAD_M = 0.02
 
 
 class CalibrationError(ValueError):
@@ -70,6 +71,11 @@ def find_calibration_file(folder) -> Path:
     if len(candidates) > 1:
         names = ", ".join(p.name for p in candidates)
         raise CalibrationError(f"{folder}: several calibration files ({names}); keep one or name it calibration.toml")
+    lookalikes = sorted(p.name for p in folder.glob("*calib*") if p.is_file())
+    if lookalikes:
+        raise CalibrationError(f"{folder}: {', '.join(lookalikes)} is not a calibration format this reads; convert it "
+                               "to an anipose-style calibration.toml (or EasyMocap intri.yml + extri.yml, or a "
+                               "Qualisys .qca.txt)")
     raise CalibrationNotFoundError(
         f"{folder}: no calibration found; expected calibration.toml, intri.yml + extri.yml, or a *.qca.txt file")
 
@@ -90,19 +96,27 @@ def read_calibration(path, units: str | None = None, image_sizes: dict | None = 
         raise CalibrationNotFoundError(f"{path}: calibration file not found")
     elif name.endswith(".qca.txt") or name.endswith(".qca") or _sniff(path) == "xml":
         cams = _read_qca(path, units)
-    elif path.suffix.lower() == ".toml" or _sniff(path) == "toml":
+    elif path.suffix.lower() in (".toml", "") or (path.suffix.lower() in (".txt", ".cfg") and _sniff(path) == "toml"):
         cams = _read_toml(path, units, image_sizes)
     else:
-        raise CalibrationError(f"{path.name}: unrecognised calibration format; expected a .toml, intri.yml/extri.yml "
-                               "or .qca.txt file")
+        raise CalibrationError(f"{path.name}: unrecognised calibration format; convert it to an anipose-style "
+                               "calibration.toml (or EasyMocap intri.yml + extri.yml, or a Qualisys .qca.txt)")
     seen = set()
     for c in cams:
         if c.name in seen:
             raise CalibrationError(f"{path.name}: two cameras are named '{c.name}'; camera names must be unique")
         seen.add(c.name)
     cams.sort(key=lambda c: natural_key(c.name))
-    _warn_if_units_look_wrong(path, cams)
+    _require_plausible_units(path, cams)
     return cams
+
+
+def require_two_cameras(path, cams: list[Camera]) -> None:
+    """A capture is tracked from two views at least (the readers themselves also read a single camera)."""
+    if len(cams) < 2:
+        found = f"one camera ('{cams[0].name}')" if cams else "no camera"
+        raise CalibrationError(f"{Path(path).name}: {found} found; multi-camera tracking needs at least two "
+                               "calibrated cameras: calibrate every camera of the take into one file")
 
 
 def _sniff(path: Path) -> str:
@@ -114,16 +128,33 @@ def _sniff(path: Path) -> str:
     return "toml"
 
 
-def _warn_if_units_look_wrong(path: Path, cams: list[Camera]) -> None:
-    if not cams:
+def _units_fix(path: Path, unit: str) -> str:
+    if path.suffix.lower() == ".toml":
+        return f'add units = "{unit}" under [metadata] in the file (or choose Units: {unit} when importing)'
+    return f"choose Units: {unit} when importing (load_capture(..., units='{unit}'))"
+
+
+def _require_plausible_units(path: Path, cams: list[Camera]) -> None:
+    """Camera centres thousands of metres apart, or all within millimetres, mean the length unit is wrong."""
+    if len(cams) < 2:
         return
-    dist = float(np.median([np.linalg.norm(c.center) for c in cams]))
-    if dist > _SUSPICIOUS_DISTANCE_M:
-        warnings.warn(f"{path.name}: cameras are a median {dist:.0f} m from the origin; the file is probably in "
-                      "millimetres: pass units='mm' (or add [metadata] units = \"mm\")", stacklevel=3)
+    centres = np.array([c.center for c in cams])
+    spread = float(np.max(np.linalg.norm(centres[:, None] - centres[None], axis=-1)))
+    if spread > LARGEST_CAMERA_SPREAD_M:
+        raise CalibrationError(f"{path.name}: the cameras are up to {spread:.0f} m apart, more than any capture room; "
+                               f"the file is probably in millimetres read as metres: {_units_fix(path, 'mm')}")
+    if spread < SMALLEST_CAMERA_SPREAD_M:
+        raise CalibrationError(f"{path.name}: the cameras are all within {spread * 1000:.1f} mm of each other; the "
+                               f"file is probably in metres read as millimetres: {_units_fix(path, 'm')}")
+
+
+_NOT_FINITE_FIX = "the calibration did not converge or the file was edited: recalibrate, or correct the value"
 
 
 def _make_camera(where: str, name, K, dist, R, t, width, height) -> Camera:
+    for what, value in (("intrinsic matrix", K), ("distortion", dist), ("rotation", R), ("translation", t)):
+        if not np.all(np.isfinite(np.asarray(value, dtype=np.float64))):
+            raise CalibrationError(f"{where}: camera '{name}' has NaN or infinite values in its {what}; {_NOT_FINITE_FIX}")
     try:
         return Camera(str(name), K, dist, R, t, width, height)
     except CameraError as exc:
@@ -175,7 +206,7 @@ def _numeric(where: str, cam: str, key: str, value, shapes: tuple) -> np.ndarray
             got = f"a {'x'.join(str(s) for s in arr.shape) or 'single number'} '{key}'"
         raise CalibrationError(f"{where}: camera '{cam}' has {got}; expected {want}")
     if not np.all(np.isfinite(arr)):
-        raise CalibrationError(f"{where}: camera '{cam}' has NaN or infinite values in '{key}'")
+        raise CalibrationError(f"{where}: camera '{cam}' has NaN or infinite values in '{key}'; {_NOT_FINITE_FIX}")
     return arr
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 
 from ..camera import Camera
-from .calibration import MissingImageSizeError, find_calibration_file, read_calibration
+from .calibration import MissingImageSizeError, find_calibration_file, read_calibration, require_two_cameras
 from .frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, FrameSource, FrameSourceError, find_video
 
 
@@ -149,6 +149,7 @@ def load_capture(folder, units: str | None = None, offsets: dict | None = None, 
         cameras = read_calibration(calib_path, units=units)
     except MissingImageSizeError:
         cameras = read_calibration(calib_path, units=units, image_sizes=_footage_sizes(videos_dir))
+    require_two_cameras(calib_path, cameras)
     paths = {cam.name: find_video(videos_dir, cam.name) for cam in cameras}
     try:
         frames = FrameSource(paths, offsets=offsets, cache_size=cache_size)
