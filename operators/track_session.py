@@ -14,7 +14,7 @@ from ..addon import scene_bridge
 from ..core.capture.capture import load_capture
 from ..core.features.learned import require_model
 from ..core.likelihood import resolve_weights
-from ..core.results import ResultWriter
+from ..core.results import ResultWriter, atomic_path
 from ..core.tracking import Tracker, TrackingSettings
 
 
@@ -146,13 +146,16 @@ class TrackSession:
 
             import bpy
 
-            export_bvh(bpy.context, self.armature, out / "animation.bvh", frames)
-            export_fbx(bpy.context, self.armature, out / "animation.fbx", frames)
+            with atomic_path(out / "animation.bvh") as tmp:
+                export_bvh(bpy.context, self.armature, tmp, frames)
+            with atomic_path(out / "animation.fbx") as tmp:
+                export_fbx(bpy.context, self.armature, tmp, frames)
             written.update(bvh=out / "animation.bvh", fbx=out / "animation.fbx")
         if save_blend:
             import bpy
 
-            bpy.ops.wm.save_as_mainfile(filepath=str(out / "tracked.blend"), copy=True)
+            with atomic_path(out / "tracked.blend") as tmp:
+                bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True)
             written["blend"] = out / "tracked.blend"
         if overlays:
             written["overlay"] = self.write_overlays()
