@@ -162,7 +162,10 @@ def _make_camera(where: str, name, K, dist, R, t, width, height) -> Camera:
 
 
 def _as_size(where: str, cam: str, value) -> tuple[int, int]:
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
     if arr.size != 2 or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or np.any(arr != np.round(arr)):
         raise CalibrationError(f"{where}: camera '{cam}' has image size {value!r}; expected two positive whole "
                                "numbers [width, height]")
@@ -227,6 +230,8 @@ def _read_toml(path: Path, units, image_sizes) -> list[Camera]:
     where = path.name
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise CalibrationError(f"{where}: not a text file (not UTF-8); export the calibration as TOML text") from None
     except tomllib.TOMLDecodeError as exc:
         raise CalibrationError(f"{where}: not valid TOML ({exc})") from None
     unit = _toml_units(where, doc, units)
@@ -281,9 +286,11 @@ def _easymocap_paths(path: Path) -> tuple[Path, Path]:
 def _open_storage(path: Path):
     import cv2
 
+    if path.stat().st_size == 0:
+        raise CalibrationError(f"{path.name}: the file is empty; export the calibration again")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
+    except (cv2.error, SystemError) as exc:  # some parse errors surface as SystemError from the binding
         raise CalibrationError(f"{path.name}: not a readable OpenCV YAML file ({str(exc).strip()})") from None
     if not fs.isOpened():
         raise CalibrationError(f"{path.name}: OpenCV could not open it as a YAML/XML FileStorage file")
@@ -297,7 +304,12 @@ def _storage_names(fs, where: str) -> list[str]:
     names = []
     for i in range(node.size()):
         item = node.at(i)
-        names.append(item.string() if item.isString() else str(int(item.real())))
+        if item.isString():
+            names.append(item.string())
+        elif item.isInt() or (item.isReal() and float(item.real()).is_integer()):
+            names.append(str(int(item.real())))
+        else:
+            raise CalibrationError(f"{where}: entry {i} of 'names' is not a camera name; write names as strings")
     return names
 
 
@@ -307,13 +319,29 @@ def _storage_mat(fs, where: str, cam: str, key: str, required: bool = True):
         if required:
             raise CalibrationError(f"{where}: camera '{cam}' has no '{key}' entry")
         return None
-    mat = node.mat()
+    import cv2
+
+    try:
+        mat = node.mat()
+    except (cv2.error, SystemError):  # rows x cols disagree with the data, or an unknown element type
+        mat = None
     if mat is None:
         raise CalibrationError(f"{where}: camera '{cam}' entry '{key}' is not an !!opencv-matrix")
     return np.asarray(mat, dtype=np.float64)
 
 
 def _read_easymocap(path: Path, units, image_sizes) -> list[Camera]:
+    import cv2
+
+    try:
+        return _read_easymocap_files(path, units, image_sizes)
+    except (cv2.error, SystemError) as exc:  # OpenCV asserts on structures it did not expect (a list for a map...)
+        reason = " ".join(str(exc).split())[-160:]
+        raise CalibrationError(f"{path.name}: OpenCV cannot read this EasyMocap file's structure ({reason}); export "
+                               "intri.yml and extri.yml again") from None
+
+
+def _read_easymocap_files(path: Path, units, image_sizes) -> list[Camera]:
     intri_path, extri_path = _easymocap_paths(path)
     wi, we = intri_path.name, extri_path.name
     scale = UNIT_SCALE[normalize_units(units, wi)] if units is not None else 1.0
