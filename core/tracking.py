@@ -21,6 +21,7 @@ from .limb_search import limb_dofs, search_limbs
 from .optimizers import PoseSpace, make_optimizer
 from .proxy import make_proxy
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
+from .view_presence import views_in_play
 
 REANCHOR_ANGLE = np.deg2rad(20.0)
 # First frame from keypoints: the global search then only needs to look this far around the fitted pose.
@@ -156,6 +157,7 @@ class Tracker:
         self.keypoint_fit = None
         self.limb_off_frames = {}  # limb -> frames in a row its keypoints disagreed
         self.recoveries = []
+        self.views_left_out = {}  # {frame: [camera names]} left out of the image terms that frame
         self.proposals = []
         self.history = []  # relative poses of the solved frames (most recent last)
         self.estimates = []
@@ -247,6 +249,15 @@ class Tracker:
             guide_poses = self._guide_poses()
         feats = self.features(frame, guide_poses)
         self.energy.set_frame(feats, self.evidence)
+        predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
+        targets = self.energy.targets
+        self.views_in_play = views_in_play(
+            self.capture.cameras, predicted, self.evidence, silhouette_area=targets.observed_count,
+            person_area=self.energy.reference_area, picture_area=np.multiply(targets.widths, targets.heights))
+        self.energy.set_view_weights(self.views_in_play.astype(np.float64))
+        if not self.views_in_play.all():
+            self.views_left_out[int(frame)] = [c.name for c, keep in zip(self.capture.cameras, self.views_in_play)
+                                               if not keep]
         return feats
 
     @property
@@ -476,8 +487,11 @@ class Tracker:
 
         cameras = [c.scaled(self.scale) for c in self.capture.cameras]
         keypoints = self.energy.keypoints if self.evidence is not None and self.energy.weights.keypoint else None
+        in_play = getattr(self, "views_in_play", None)
+        silhouettes = [f.silhouette if in_play is None or in_play[v] else np.zeros_like(f.silhouette)
+                       for v, f in enumerate(feats)]  # a left-out view offers no contour to fit
         return IcpProblem(body=self.body, proxy=self.proxy, cameras=cameras,
-                          silhouettes=[f.silhouette for f in feats], to_absolute=self.to_absolute,
+                          silhouettes=silhouettes, to_absolute=self.to_absolute,
                           prior=getattr(self.energy, "prior", None),
                           keypoints=None if keypoints is None else keypoints.scaled(self.scale),
                           rig_points=self.energy.rig_points if keypoints is not None else None)

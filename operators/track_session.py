@@ -119,6 +119,8 @@ class TrackSession:
             self.writer.info["first_frame_keypoint_fit"] = self.tracker.keypoint_fit
         if self.tracker.recoveries:
             self.writer.info["limb_recoveries"] = self.tracker.recoveries
+        if self.tracker.views_left_out:  # the person outside a view's picture, or no person found there
+            self.writer.info["views_left_out"] = {str(f): names for f, names in self.tracker.views_left_out.items()}
         self.writer.add(est, self.tracker.state())
         return est
 
