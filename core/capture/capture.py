@@ -134,11 +134,13 @@ def _load_backgrounds(folder: Path, cameras: list) -> dict | None:
     return plates or None
 
 
-def load_capture(folder, units: str | None = None, offsets: dict | None = None, cache_size: int = 64) -> Capture:
+def load_capture(folder, units: str | None = None, offsets: dict | None = None, cache_size: int = 4) -> Capture:
     """Read a capture folder: calibration (metres), per-camera footage, optional background plates.
 
     units: the calibration's length unit if the file does not say it ('m', 'cm', 'mm').
     offsets: {camera name: first frame of that camera's footage that belongs to capture frame 0}.
+    cache_size: decoded frames kept per camera. Tracking reads each frame once or twice in order, so a few
+    suffice; the memory stays flat however long the take (64 HD frames x 4 cameras would hold 1.6 GB).
     """
     folder = Path(folder)
     if not folder.is_dir():

@@ -124,7 +124,7 @@ class _VideoReader:
 class FrameSource:
     """Synchronised frames of several cameras: read(f) -> {camera name: BGR uint8 image}."""
 
-    def __init__(self, paths: dict, offsets: dict | None = None, cache_size: int = 64, fps: float | None = None):
+    def __init__(self, paths: dict, offsets: dict | None = None, cache_size: int = 4, fps: float | None = None):
         if not paths:
             raise FrameSourceError("no cameras given: pass {camera name: video path or image folder}")
         offsets = dict(offsets or {})
