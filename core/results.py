@@ -9,7 +9,6 @@ any reason keeps what it solved, and `--resume` continues from the checkpoint ex
 """
 import errno
 import json
-import os
 import pickle
 import platform
 import tempfile
