@@ -487,14 +487,19 @@ class Tracker:
 
         cameras = [c.scaled(self.scale) for c in self.capture.cameras]
         keypoints = self.energy.keypoints if self.evidence is not None and self.energy.weights.keypoint else None
-        in_play = getattr(self, "views_in_play", None)
-        silhouettes = [f.silhouette if in_play is None or in_play[v] else np.zeros_like(f.silhouette)
-                       for v, f in enumerate(feats)]  # a left-out view offers no contour to fit
         return IcpProblem(body=self.body, proxy=self.proxy, cameras=cameras,
-                          silhouettes=silhouettes, to_absolute=self.to_absolute,
+                          silhouettes=self._without_left_out_views([f.silhouette for f in feats]),
+                          to_absolute=self.to_absolute,
                           prior=getattr(self.energy, "prior", None),
                           keypoints=None if keypoints is None else keypoints.scaled(self.scale),
                           rig_points=self.energy.rig_points if keypoints is not None else None)
+
+    def _without_left_out_views(self, silhouettes):
+        """The silhouettes with those of the views left out this frame emptied: they offer ICP no contour."""
+        in_play = getattr(self, "views_in_play", None)
+        if in_play is None:
+            return list(silhouettes)
+        return [s if keep else np.zeros_like(s) for s, keep in zip(silhouettes, in_play)]
 
     def _record(self, frame, pose, energy, seconds, evaluations):
         self.history.append(self.to_relative(pose))
