@@ -6,6 +6,7 @@ The only place that translates between Blender data and the engine's plain array
 import numpy as np
 
 from ..core.body import Skeleton, build_body
+from ..core.rig_checks import require_person_height, require_skin_weights, standing_height
 
 
 class SubjectError(ValueError):
@@ -93,6 +94,9 @@ def body_from_blender(armature_obj, mesh_obj=None, scene=None):
     if not group_bone:
         raise SubjectError(f"mesh {mesh_obj.name!r} has no vertex groups named after deforming bones of "
                            f"{armature_obj.name!r}: skin it first (Ctrl+P > With Automatic Weights)")
+    require_skin_weights(weights, mesh_obj.name, armature_obj.name)
+    world = co @ np.array(mesh_obj.matrix_world)[:3, :3].T + np.array(mesh_obj.matrix_world)[:3, 3]
+    require_person_height(standing_height(world), armature_obj.name, scene.unit_settings.scale_length)
     return build_body(skeleton, vertices, faces, weights, _user_dof_specs(armature_obj))
 
 

@@ -270,7 +270,27 @@ class EnergyModel:
         self._rig_points = None
         self.color_model = None  # (S,2,K) normalised histograms
         self.color_count = None  # (S,) sample sizes M
+        self.view_weights = None  # (C,) 0/1 per view this frame; None: every view counts (the paper's terms)
         self.set_reference_pose(body.default_pose())
+
+    def set_view_weights(self, weights):
+        """Which views the image terms listen to this frame (0 = left out, e.g. the person is outside
+        that picture); None or all ones: every view, exactly the paper's terms."""
+        if weights is None or np.all(np.asarray(weights) == 1):
+            self.view_weights = None
+            return
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if w.shape != (len(self.cameras),) or not np.all(w >= 0) or w.sum() <= 0:
+            raise LikelihoodError(f"view weights must be {len(self.cameras)} non-negative numbers, not all zero; "
+                                  f"got {weights!r}")
+        self.view_weights = w
+
+    def _over_views(self, per_view, mean=True):
+        """(P,C) -> (P,): mean (or sum) over the views, weighted by view_weights when some are left out."""
+        if self.view_weights is None:
+            return per_view.mean(axis=1) if mean else per_view.sum(axis=1)
+        total = per_view @ self.view_weights
+        return total / self.view_weights.sum() if mean else total * len(self.cameras) / self.view_weights.sum()
 
     # ---- geometry ----------------------------------------------------------------------------
     def _check_poses(self, poses):
@@ -405,7 +425,7 @@ class EnergyModel:
         self._check_reference("silh")
         n_obs = self.targets.observed_count[None, :]
         xor = stats[..., render.TEMPLATE] + n_obs - 2 * stats[..., render.OVERLAP]
-        return (xor / self.reference_area[None, :]).mean(axis=1)
+        return self._over_views(xor / self.reference_area[None, :])
 
     def _term_silh_ch(self, stats, hist):
         n_t = stats[..., render.TEMPLATE]
@@ -416,19 +436,20 @@ class EnergyModel:
             far = np.minimum(diag, self.targets.chamfer_cap)  # no template: every observed pixel at the cap
             second = np.where(n_t > 0, stats[..., render.SUM_DT] / (2 * n_obs), 0.5 * far)
         second = np.where(n_obs > 0, second, 0.0)
-        return ((first + second) / self.scale).mean(axis=1)
+        return self._over_views((first + second) / self.scale)
 
     def _term_edge(self, stats, hist):
         self._check_reference("edge")
-        return stats[..., render.BOUNDARY_OFF].sum(axis=1) / self.reference_boundary
+        return self._over_views(stats[..., render.BOUNDARY_OFF], mean=False) / self.reference_boundary
 
     def _term_edge_ch(self, stats, hist):
         self._check_reference("edge")
         cap = EDGE_DT_CAP_PX * self.scale
-        return stats[..., render.SUM_EDGE_DT].sum(axis=1) / (cap * self.reference_boundary)
+        return self._over_views(stats[..., render.SUM_EDGE_DT], mean=False) / (cap * self.reference_boundary)
 
     def _term_color(self, stats, hist):
-        cost = bhattacharyya_cost(self.color_model, hist.sum(axis=1))
+        seen = hist.sum(axis=1) if self.view_weights is None else np.tensordot(hist, self.view_weights, axes=([1], [0]))
+        cost = bhattacharyya_cost(self.color_model, seen)
         return cost @ self.part_weights
 
     # ---- colour model ----------------------------------------------------------------------------

@@ -1,9 +1,12 @@
 """Overlay images: the tracked body drawn over the footage, one video per camera, to check by eye."""
 import colorsys
+import os
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+from .atomic_files import partial_path
 
 
 def part_colours(n):
@@ -76,14 +79,16 @@ class OverlayWriter:
                 cv2.putText(img, label, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
             w = self.writers.get(cam.name)
             if w is None:
-                path = self.folder / f"{cam.name}.mp4"
+                # written under a temporary name and renamed by close(): a kill leaves no half-written video
+                path = partial_path(self.folder / f"{cam.name}.mp4")
                 w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (img.shape[1], img.shape[0]))
                 self.writers[cam.name] = w
             w.write(img)
 
     def close(self):
-        for w in self.writers.values():
+        for name, w in self.writers.items():
             w.release()
+            os.replace(partial_path(self.folder / f"{name}.mp4"), self.folder / f"{name}.mp4")
         self.writers = {}
 
 

@@ -7,23 +7,44 @@ any reason keeps what it solved, and `--resume` continues from the checkpoint ex
     report.json  settings, seed, per-frame energy and seconds, totals, software versions
     checkpoint.pkl  the tracker's state after the last solved frame (optimiser particles, RNG, colour model)
 """
+import errno
 import json
-import os
 import pickle
 import platform
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from .atomic_files import atomic_path
 from .tracking import FrameEstimate
 
 
+class ResultWriteError(OSError):
+    """The result folder cannot be written (not writable, disk full...); the message names the folder."""
+
+    def __init__(self, message, errno_code=None):
+        super().__init__(message)
+        self.errno = errno_code
+
+
 def _atomic_write(path, write):
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         write(fh)
-    os.replace(tmp, path)
+
+
+def require_writable_folder(out):
+    """Create the result folder and prove a file can be written in it, or a ResultWriteError naming it."""
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".write_probe"):
+            pass
+    except OSError as exc:
+        raise ResultWriteError(f"the result folder {out} cannot be written ({exc.strerror or exc}); choose another "
+                               "result folder, or fix its permissions", exc.errno) from None
+    return out
 
 
 def software_versions():
@@ -43,8 +64,7 @@ def software_versions():
 
 class ResultWriter:
     def __init__(self, out_dir, body, settings, info=None, blender_version=None):
-        self.out = Path(out_dir)
-        self.out.mkdir(parents=True, exist_ok=True)
+        self.out = require_writable_folder(out_dir)
         self.body = body
         self.settings = settings
         self.info = dict(info or {})
@@ -57,11 +77,26 @@ class ResultWriter:
         return self.out / "checkpoint.pkl"
 
     def add(self, estimate, tracker_state=None):
+        """Write the result files with `estimate` added. If they cannot be written (a full disk...), the
+        files keep the frames written before, the estimate is dropped, and a ResultWriteError says so."""
         self.estimates.append(estimate)
-        self.write()
-        if tracker_state is not None:
-            _atomic_write(self.checkpoint_path, lambda fh: pickle.dump(
-                {"estimates": self.estimates, "state": tracker_state, "settings": self.settings.to_dict()}, fh))
+        try:
+            self.write()
+            if tracker_state is not None:
+                _atomic_write(self.checkpoint_path, lambda fh: pickle.dump(
+                    {"estimates": self.estimates, "state": tracker_state, "settings": self.settings.to_dict()}, fh))
+        except OSError as exc:
+            self.estimates.pop()
+            raise self._write_error(estimate.frame, exc) from None
+
+    def _write_error(self, frame, exc):
+        why = "the disk is full" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
+        if self.estimates:
+            kept = (f"frames {self.estimates[0].frame}-{self.estimates[-1].frame} ({len(self.estimates)}) "
+                    "are saved there; free space and continue with --resume")
+        else:
+            kept = "no frame was saved; free space or choose another result folder"
+        return ResultWriteError(f"could not write frame {frame} to {self.out}: {why}; {kept}", exc.errno)
 
     def write(self):
         est = self.estimates
@@ -111,4 +146,4 @@ def load_joints(path):
         return [str(n) for n in data["names"]], data["frames"].astype(np.int64), data["positions"]
 
 
-__all__ = ["ResultWriter", "FrameEstimate", "load_joints", "software_versions"]
+__all__ = ["ResultWriter", "ResultWriteError", "FrameEstimate", "atomic_path", "load_joints", "software_versions"]

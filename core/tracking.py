@@ -23,6 +23,7 @@ from .limb_search import limb_dofs, search_limbs
 from .optimizers import PoseSpace, make_optimizer
 from .proxy import make_proxy
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
+from .view_presence import views_in_play
 
 REANCHOR_ANGLE = np.deg2rad(20.0)
 # First frame from keypoints: the global search then only needs to look this far around the fitted pose.
@@ -167,6 +168,7 @@ class Tracker:
         self.keypoint_fit = None
         self.limb_off_frames = {}  # limb -> frames in a row its keypoints disagreed
         self.recoveries = []
+        self.views_left_out = {}  # {frame: [camera names]} left out of the image terms that frame
         self.proposals = []
         self.history = []  # relative poses of the solved frames (most recent last)
         self.estimates = []
@@ -265,6 +267,15 @@ class Tracker:
             guide_poses = self._guide_poses()
         feats = self.features(frame, guide_poses)
         self.energy.set_frame(feats, self.evidence)
+        predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
+        targets = self.energy.targets
+        self.views_in_play = views_in_play(
+            self.capture.cameras, predicted, self.evidence, silhouette_area=targets.observed_count,
+            person_area=self.energy.reference_area, picture_area=np.multiply(targets.widths, targets.heights))
+        self.energy.set_view_weights(self.views_in_play.astype(np.float64))
+        if not self.views_in_play.all():
+            self.views_left_out[int(frame)] = [c.name for c, keep in zip(self.capture.cameras, self.views_in_play)
+                                               if not keep]
         return feats
 
     @property
@@ -500,10 +511,17 @@ class Tracker:
         silhouettes = self.fine_silhouettes if fine else [f.silhouette for f in feats]
         keypoints = self.energy.keypoints if self.evidence is not None and self.energy.weights.keypoint else None
         return IcpProblem(body=self.body, proxy=self.proxy, cameras=cameras,
-                          silhouettes=silhouettes, to_absolute=self.to_absolute,
+                          silhouettes=self._without_left_out_views(silhouettes), to_absolute=self.to_absolute,
                           prior=getattr(self.energy, "prior", None),
                           keypoints=None if keypoints is None else keypoints.scaled(scale),
                           rig_points=self.energy.rig_points if keypoints is not None else None)
+
+    def _without_left_out_views(self, silhouettes):
+        """The silhouettes with those of the views left out this frame emptied: they offer ICP no contour."""
+        in_play = getattr(self, "views_in_play", None)
+        if in_play is None:
+            return list(silhouettes)
+        return [s if keep else np.zeros_like(s) for s, keep in zip(silhouettes, in_play)]
 
     def _record(self, frame, pose, energy, seconds, evaluations):
         self.history.append(self.to_relative(pose))

@@ -122,6 +122,7 @@ def run_session(session, progress=None, log=print):
 
 def run(args):
     from ..addon.scene_bridge import SubjectError, find_armature
+    from ..core.results import ResultWriteError
     from .track_session import TrackSession
 
     scene = open_subject(args.scene)
@@ -130,7 +131,7 @@ def run(args):
         session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args),
                                frames=parse_frames(args.frames), resume=args.resume,
                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
-    except (SubjectError, ValueError, FileNotFoundError) as exc:
+    except (SubjectError, ValueError, FileNotFoundError, ResultWriteError) as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2
     if args.resume:
@@ -141,6 +142,9 @@ def run(args):
         print(f"interrupted: {session.n_done} frames solved and saved in {args.out} (use --resume to continue)",
               file=sys.stderr)
         return 130
+    except ResultWriteError as exc:
+        print(f"markerless_mocap track: {exc}", file=sys.stderr)
+        return 1
     written = session.finish(export=not args.no_export, overlays=not args.no_overlays,
                              save_blend=not args.no_export)
     print(f"tracked {session.n_done} frames -> {args.out}", file=sys.stderr)

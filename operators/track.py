@@ -382,13 +382,18 @@ class MOCAP_OT_track(bpy.types.Operator):
             context.workspace.status_text_set(None)
 
     def cancel(self, context):
-        """Blender ends the operator (file loaded, window closed): stop the worker, keep the keys."""
+        """Blender ends the operator (file loaded, window closed): stop the worker, keep the keys and
+        write the result files for the solved frames, as Esc does."""
         job = self._job
         job.request_cancel()
         if job.thread is not None:
             job.thread.join()
         job.drain()
         self._cleanup(context)
+        try:
+            self._end(context, job)
+        except Exception:  # Blender is tearing the operator down: report, never block it
+            traceback.print_exc()
         context.scene.mocap.is_tracking = False
 
 

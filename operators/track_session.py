@@ -14,7 +14,7 @@ from ..addon import scene_bridge
 from ..core.capture.capture import load_capture
 from ..core.features.learned import require_model
 from ..core.likelihood import resolve_weights
-from ..core.results import ResultWriter
+from ..core.results import ResultWriter, atomic_path
 from ..core.tracking import Tracker, TrackingSettings
 
 
@@ -46,11 +46,18 @@ class TrackSession:
         self.capture = load_capture(capture_dir, units=units)
         if resolve_weights(self.settings.likelihood).needs_learned_evidence:
             require_model()  # a clear error now, not a traceback at the first frame
-        n = self.capture.frames.n_frames
-        self.all_frames = list(range(n)) if frames is None else [f for f in frames if 0 <= f < n]
-        if not self.all_frames:
-            raise ValueError(f"no frames to track: the capture has frames 0-{n - 1}, asked for "
-                             f"{frames[0]}-{frames[-1]}" if frames else "the capture has no frames")
+        footage = self.capture.frames
+        try:
+            if frames is None:
+                self.all_frames = list(range(footage.n_frames))
+                note = footage.shorter_footage_note()
+                if note:
+                    self.log(f"warning: {note}")
+            else:
+                self.all_frames = footage.require_frames(frames)
+        except ValueError:
+            self.capture.close()
+            raise
         self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
         self.rough_pose = self.body.default_pose()  # the subject as the user placed it
         self.capture_dir = capture_dir
@@ -120,6 +127,8 @@ class TrackSession:
             self.writer.info["first_frame_keypoint_fit"] = self.tracker.keypoint_fit
         if self.tracker.recoveries:
             self.writer.info["limb_recoveries"] = self.tracker.recoveries
+        if self.tracker.views_left_out:  # the person outside a view's picture, or no person found there
+            self.writer.info["views_left_out"] = {str(f): names for f, names in self.tracker.views_left_out.items()}
         self.writer.add(est, self.tracker.state())
         return est
 
@@ -147,13 +156,16 @@ class TrackSession:
 
             import bpy
 
-            export_bvh(bpy.context, self.armature, out / "animation.bvh", frames, scene=self.scene)
-            export_fbx(bpy.context, self.armature, out / "animation.fbx", frames, scene=self.scene)
+            with atomic_path(out / "animation.bvh") as tmp:
+                export_bvh(bpy.context, self.armature, tmp, frames, scene=self.scene)
+            with atomic_path(out / "animation.fbx") as tmp:
+                export_fbx(bpy.context, self.armature, tmp, frames, scene=self.scene)
             written.update(bvh=out / "animation.bvh", fbx=out / "animation.fbx")
         if save_blend:
             import bpy
 
-            bpy.ops.wm.save_as_mainfile(filepath=str(out / "tracked.blend"), copy=True)
+            with atomic_path(out / "tracked.blend") as tmp:
+                bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True)
             written["blend"] = out / "tracked.blend"
         if overlays:
             written["overlay"] = self.write_overlays()

@@ -47,10 +47,10 @@ def test_anipose_units_from_metadata_and_default(tmp_path):
     p = tmp_path / "calibration.toml"
     p.write_text(text.replace("adjusted = false", 'units = "mm"\nadjusted = false'))
     np.testing.assert_allclose(by_name(read_calibration(p))["cam_10"].t, [0.1, -0.2, 3.0])
-    # without units anipose is read as metres, and camera centres thousands of metres away trigger a warning
-    with pytest.warns(UserWarning, match="millimetres"):
-        cams = read_calibration(DATA / "anipose_mm.toml")
-    np.testing.assert_allclose(by_name(cams)["cam_10"].t, [100.0, -200.0, 3000.0])
+    # without units anipose is read as metres: cameras thousands of metres apart are refused, naming the fix
+    with pytest.raises(CalibrationError, match=r"anipose_mm\.toml: the cameras are up to \d+ m apart.*probably in "
+                                               r"millimetres read as metres: add units = \"mm\" under \[metadata\]"):
+        read_calibration(DATA / "anipose_mm.toml")
 
 
 def test_pose2sim_four_distortions_float_size_and_matrix_rotation():
@@ -82,9 +82,8 @@ def test_freemocap_defaults_to_mm_and_matches_world_position():
     np.testing.assert_allclose(cams["cam_1"].t, [1.0, 0.0, 2.5])
     np.testing.assert_allclose(cams["cam_1"].R, RZ90, atol=1e-12)
     # units argument overrides the mm default
-    with pytest.warns(UserWarning, match="probably in millimetres"):
-        cams_m = by_name(read_calibration(DATA / "freemocap_calibration.toml", units="m"))
-    np.testing.assert_allclose(cams_m["cam_1"].t, [1000.0, 0.0, 2500.0])
+    with pytest.raises(CalibrationError, match="probably in millimetres read as metres"):
+        read_calibration(DATA / "freemocap_calibration.toml", units="m")
 
 
 def test_caliscope_nested_tables():

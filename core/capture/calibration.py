@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -28,8 +27,10 @@ UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 _UNIT_ALIASES = {"m": "m", "meter": "m", "meters": "m", "metre": "m", "metres": "m",
                  "cm": "cm", "centimeter": "cm", "centimeters": "cm", "centimetre": "cm", "centimetres": "cm",
                  "mm": "mm", "millimeter": "mm", "millimeters": "mm", "millimetre": "mm", "millimetres": "mm"}
-# Camera centres further than this (in metres) from the origin suggest the units are wrong.
-_SUSPICIOUS_DISTANCE_M = 100.0
+# No capture room has cameras further apart than this, or all closer together than that: a spread
+# outside the two is a file in millimetres read as metres (x1000), or the other way round (/1000).
+LARGEST_CAMERA_SPREAD_M = 100.0
+SMALLEST_CAMERA_SPREAD_M = 0.02
 
 
 class CalibrationError(ValueError):
@@ -70,6 +71,11 @@ def find_calibration_file(folder) -> Path:
     if len(candidates) > 1:
         names = ", ".join(p.name for p in candidates)
         raise CalibrationError(f"{folder}: several calibration files ({names}); keep one or name it calibration.toml")
+    lookalikes = sorted(p.name for p in folder.glob("*calib*") if p.is_file())
+    if lookalikes:
+        raise CalibrationError(f"{folder}: {', '.join(lookalikes)} is not a calibration format this reads; convert it "
+                               "to an anipose-style calibration.toml (or EasyMocap intri.yml + extri.yml, or a "
+                               "Qualisys .qca.txt)")
     raise CalibrationNotFoundError(
         f"{folder}: no calibration found; expected calibration.toml, intri.yml + extri.yml, or a *.qca.txt file")
 
@@ -90,19 +96,27 @@ def read_calibration(path, units: str | None = None, image_sizes: dict | None = 
         raise CalibrationNotFoundError(f"{path}: calibration file not found")
     elif name.endswith(".qca.txt") or name.endswith(".qca") or _sniff(path) == "xml":
         cams = _read_qca(path, units)
-    elif path.suffix.lower() == ".toml" or _sniff(path) == "toml":
+    elif path.suffix.lower() in (".toml", "") or (path.suffix.lower() in (".txt", ".cfg") and _sniff(path) == "toml"):
         cams = _read_toml(path, units, image_sizes)
     else:
-        raise CalibrationError(f"{path.name}: unrecognised calibration format; expected a .toml, intri.yml/extri.yml "
-                               "or .qca.txt file")
+        raise CalibrationError(f"{path.name}: unrecognised calibration format; convert it to an anipose-style "
+                               "calibration.toml (or EasyMocap intri.yml + extri.yml, or a Qualisys .qca.txt)")
     seen = set()
     for c in cams:
         if c.name in seen:
             raise CalibrationError(f"{path.name}: two cameras are named '{c.name}'; camera names must be unique")
         seen.add(c.name)
     cams.sort(key=lambda c: natural_key(c.name))
-    _warn_if_units_look_wrong(path, cams)
+    _require_plausible_units(path, cams)
     return cams
+
+
+def require_two_cameras(path, cams: list[Camera]) -> None:
+    """A capture is tracked from two views at least (the readers themselves also read a single camera)."""
+    if len(cams) < 2:
+        found = f"one camera ('{cams[0].name}')" if cams else "no camera"
+        raise CalibrationError(f"{Path(path).name}: {found} found; multi-camera tracking needs at least two "
+                               "calibrated cameras: calibrate every camera of the take into one file")
 
 
 def _sniff(path: Path) -> str:
@@ -114,16 +128,33 @@ def _sniff(path: Path) -> str:
     return "toml"
 
 
-def _warn_if_units_look_wrong(path: Path, cams: list[Camera]) -> None:
-    if not cams:
+def _units_fix(path: Path, unit: str) -> str:
+    if path.suffix.lower() == ".toml":
+        return f'add units = "{unit}" under [metadata] in the file (or choose Units: {unit} when importing)'
+    return f"choose Units: {unit} when importing (load_capture(..., units='{unit}'))"
+
+
+def _require_plausible_units(path: Path, cams: list[Camera]) -> None:
+    """Camera centres thousands of metres apart, or all within millimetres, mean the length unit is wrong."""
+    if len(cams) < 2:
         return
-    dist = float(np.median([np.linalg.norm(c.center) for c in cams]))
-    if dist > _SUSPICIOUS_DISTANCE_M:
-        warnings.warn(f"{path.name}: cameras are a median {dist:.0f} m from the origin; the file is probably in "
-                      "millimetres: pass units='mm' (or add [metadata] units = \"mm\")", stacklevel=3)
+    centres = np.array([c.center for c in cams])
+    spread = float(np.max(np.linalg.norm(centres[:, None] - centres[None], axis=-1)))
+    if spread > LARGEST_CAMERA_SPREAD_M:
+        raise CalibrationError(f"{path.name}: the cameras are up to {spread:.0f} m apart, more than any capture room; "
+                               f"the file is probably in millimetres read as metres: {_units_fix(path, 'mm')}")
+    if spread < SMALLEST_CAMERA_SPREAD_M:
+        raise CalibrationError(f"{path.name}: the cameras are all within {spread * 1000:.1f} mm of each other; the "
+                               f"file is probably in metres read as millimetres: {_units_fix(path, 'm')}")
+
+
+_NOT_FINITE_FIX = "the calibration did not converge or the file was edited: recalibrate, or correct the value"
 
 
 def _make_camera(where: str, name, K, dist, R, t, width, height) -> Camera:
+    for what, value in (("intrinsic matrix", K), ("distortion", dist), ("rotation", R), ("translation", t)):
+        if not np.all(np.isfinite(np.asarray(value, dtype=np.float64))):
+            raise CalibrationError(f"{where}: camera '{name}' has NaN or infinite values in its {what}; {_NOT_FINITE_FIX}")
     try:
         return Camera(str(name), K, dist, R, t, width, height)
     except CameraError as exc:
@@ -131,7 +162,10 @@ def _make_camera(where: str, name, K, dist, R, t, width, height) -> Camera:
 
 
 def _as_size(where: str, cam: str, value) -> tuple[int, int]:
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
     if arr.size != 2 or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or np.any(arr != np.round(arr)):
         raise CalibrationError(f"{where}: camera '{cam}' has image size {value!r}; expected two positive whole "
                                "numbers [width, height]")
@@ -175,7 +209,7 @@ def _numeric(where: str, cam: str, key: str, value, shapes: tuple) -> np.ndarray
             got = f"a {'x'.join(str(s) for s in arr.shape) or 'single number'} '{key}'"
         raise CalibrationError(f"{where}: camera '{cam}' has {got}; expected {want}")
     if not np.all(np.isfinite(arr)):
-        raise CalibrationError(f"{where}: camera '{cam}' has NaN or infinite values in '{key}'")
+        raise CalibrationError(f"{where}: camera '{cam}' has NaN or infinite values in '{key}'; {_NOT_FINITE_FIX}")
     return arr
 
 
@@ -196,6 +230,8 @@ def _read_toml(path: Path, units, image_sizes) -> list[Camera]:
     where = path.name
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise CalibrationError(f"{where}: not a text file (not UTF-8); export the calibration as TOML text") from None
     except tomllib.TOMLDecodeError as exc:
         raise CalibrationError(f"{where}: not valid TOML ({exc})") from None
     unit = _toml_units(where, doc, units)
@@ -250,9 +286,11 @@ def _easymocap_paths(path: Path) -> tuple[Path, Path]:
 def _open_storage(path: Path):
     import cv2
 
+    if path.stat().st_size == 0:
+        raise CalibrationError(f"{path.name}: the file is empty; export the calibration again")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
+    except (cv2.error, SystemError) as exc:  # some parse errors surface as SystemError from the binding
         raise CalibrationError(f"{path.name}: not a readable OpenCV YAML file ({str(exc).strip()})") from None
     if not fs.isOpened():
         raise CalibrationError(f"{path.name}: OpenCV could not open it as a YAML/XML FileStorage file")
@@ -266,7 +304,12 @@ def _storage_names(fs, where: str) -> list[str]:
     names = []
     for i in range(node.size()):
         item = node.at(i)
-        names.append(item.string() if item.isString() else str(int(item.real())))
+        if item.isString():
+            names.append(item.string())
+        elif item.isInt() or (item.isReal() and float(item.real()).is_integer()):
+            names.append(str(int(item.real())))
+        else:
+            raise CalibrationError(f"{where}: entry {i} of 'names' is not a camera name; write names as strings")
     return names
 
 
@@ -276,13 +319,29 @@ def _storage_mat(fs, where: str, cam: str, key: str, required: bool = True):
         if required:
             raise CalibrationError(f"{where}: camera '{cam}' has no '{key}' entry")
         return None
-    mat = node.mat()
+    import cv2
+
+    try:
+        mat = node.mat()
+    except (cv2.error, SystemError):  # rows x cols disagree with the data, or an unknown element type
+        mat = None
     if mat is None:
         raise CalibrationError(f"{where}: camera '{cam}' entry '{key}' is not an !!opencv-matrix")
     return np.asarray(mat, dtype=np.float64)
 
 
 def _read_easymocap(path: Path, units, image_sizes) -> list[Camera]:
+    import cv2
+
+    try:
+        return _read_easymocap_files(path, units, image_sizes)
+    except (cv2.error, SystemError) as exc:  # OpenCV asserts on structures it did not expect (a list for a map...)
+        reason = " ".join(str(exc).split())[-160:]
+        raise CalibrationError(f"{path.name}: OpenCV cannot read this EasyMocap file's structure ({reason}); export "
+                               "intri.yml and extri.yml again") from None
+
+
+def _read_easymocap_files(path: Path, units, image_sizes) -> list[Camera]:
     intri_path, extri_path = _easymocap_paths(path)
     wi, we = intri_path.name, extri_path.name
     scale = UNIT_SCALE[normalize_units(units, wi)] if units is not None else 1.0

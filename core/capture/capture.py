@@ -15,7 +15,7 @@ from pathlib import Path
 
 
 from ..camera import Camera
-from .calibration import MissingImageSizeError, find_calibration_file, read_calibration
+from .calibration import MissingImageSizeError, find_calibration_file, read_calibration, require_two_cameras
 from .frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, FrameSource, FrameSourceError, find_video
 
 
@@ -134,11 +134,13 @@ def _load_backgrounds(folder: Path, cameras: list) -> dict | None:
     return plates or None
 
 
-def load_capture(folder, units: str | None = None, offsets: dict | None = None, cache_size: int = 64) -> Capture:
+def load_capture(folder, units: str | None = None, offsets: dict | None = None, cache_size: int = 4) -> Capture:
     """Read a capture folder: calibration (metres), per-camera footage, optional background plates.
 
     units: the calibration's length unit if the file does not say it ('m', 'cm', 'mm').
     offsets: {camera name: first frame of that camera's footage that belongs to capture frame 0}.
+    cache_size: decoded frames kept per camera. Tracking reads each frame once or twice in order, so a few
+    suffice; the memory stays flat however long the take (64 HD frames x 4 cameras would hold 1.6 GB).
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -149,6 +151,7 @@ def load_capture(folder, units: str | None = None, offsets: dict | None = None, 
         cameras = read_calibration(calib_path, units=units)
     except MissingImageSizeError:
         cameras = read_calibration(calib_path, units=units, image_sizes=_footage_sizes(videos_dir))
+    require_two_cameras(calib_path, cameras)
     paths = {cam.name: find_video(videos_dir, cam.name) for cam in cameras}
     try:
         frames = FrameSource(paths, offsets=offsets, cache_size=cache_size)

@@ -93,7 +93,9 @@ class _VideoReader:
         fps = float(self.cap.get(cv2.CAP_PROP_FPS))
         self.fps = fps if np.isfinite(fps) and fps > 0 else None
         if self.n_frames <= 0 or self.width <= 0 or self.height <= 0:
-            raise FrameSourceError(f"camera '{name}': the video {path} reports no frames")
+            self.cap.release()
+            raise FrameSourceError(f"camera '{name}': the video {path} has no frames (empty or cut short while "
+                                   "recording); replace it with the camera's full recording")
         self.next_index = 0  # the frame the next cap.read() returns
         self.seeks = 0  # number of random seeks (for tests and profiling)
 
@@ -122,7 +124,7 @@ class _VideoReader:
 class FrameSource:
     """Synchronised frames of several cameras: read(f) -> {camera name: BGR uint8 image}."""
 
-    def __init__(self, paths: dict, offsets: dict | None = None, cache_size: int = 64, fps: float | None = None):
+    def __init__(self, paths: dict, offsets: dict | None = None, cache_size: int = 4, fps: float | None = None):
         if not paths:
             raise FrameSourceError("no cameras given: pass {camera name: video path or image folder}")
         offsets = dict(offsets or {})
@@ -162,11 +164,53 @@ class FrameSource:
             raise FrameSourceError("after the frame offsets no frame is covered by every camera: "
                                    + ", ".join(f"'{n}': {r.n_frames} frames, offset {self.offsets[n]}"
                                                for n, r in self._readers.items()))
-        rates = [r.fps for r in self._readers.values() if r.fps]
-        self.fps = float(fps) if fps else (float(rates[0]) if rates else DEFAULT_FPS)
+        rates = {n: r.fps for n, r in self._readers.items() if r.fps}
+        if not fps:
+            _require_one_frame_rate(rates, self.close)
+        self.fps = float(fps) if fps else (float(next(iter(rates.values()))) if rates else DEFAULT_FPS)
 
     def __len__(self) -> int:
         return self.n_frames
+
+    @property
+    def frames_per_camera(self) -> dict:
+        """{camera name: capture frames its footage covers} (after its offset)."""
+        return {n: r.n_frames - self.offsets[n] for n, r in self._readers.items()}
+
+    def shorter_footage_note(self) -> str | None:
+        """One line naming the cameras whose footage ends before the others', or None when all are as long."""
+        counts = self.frames_per_camera
+        longest = max(counts.values())
+        short = [n for n, c in counts.items() if c < longest]
+        if not short:
+            return None
+        named = ", ".join(f"'{n}' ({self._readers[n].path.name}) has {counts[n]} frames" for n in short)
+        return (f"{named}, the other cameras up to {longest}: only the {self.n_frames} frames every camera "
+                f"covers (0-{self.n_frames - 1}) are tracked")
+
+    def require_frames(self, frames) -> list:
+        """The asked capture frames, all of them covered by every camera; otherwise a FrameSourceError
+        naming the camera whose footage ends too early, its frame count and the fix."""
+        frames = [int(f) for f in frames]
+        if not frames:
+            raise FrameSourceError("no frames asked for")
+        first, last = min(frames), max(frames)
+        asked = f"frames {first}-{last}" if first != last else f"frame {first}"
+        if first < 0:
+            raise FrameSourceError(f"{asked} asked for: capture frames count from 0; choose a range within "
+                                   f"0-{self.n_frames - 1}")
+        counts = self.frames_per_camera
+        if last < self.n_frames:
+            return frames
+        if all(c <= last for c in counts.values()):
+            raise FrameSourceError(f"{asked} asked for, but the capture has {self.n_frames} frames "
+                                   f"(0-{self.n_frames - 1}); choose a range within 0-{self.n_frames - 1}")
+        short = [n for n, c in counts.items() if c <= last]
+        named = "; ".join(f"camera '{n}' ({self._readers[n].path.name}) has only {counts[n]} frames "
+                          f"(0-{counts[n] - 1})" for n in short)
+        raise FrameSourceError(f"{asked} asked for, but {named}, while other cameras reach frame {last}: track "
+                               f"frames {first}-{self.n_frames - 1} at most, or replace the short footage with "
+                               "the camera's full recording of the take")
 
     def image_size(self, name: str) -> tuple[int, int]:
         reader = self._reader(name)
@@ -216,3 +260,20 @@ class FrameSource:
 
     def __exit__(self, *exc):
         self.close()
+
+
+# frame rates further apart than this (relative) are different recordings, not container rounding
+_FPS_TOLERANCE = 0.001
+
+
+def _require_one_frame_rate(rates: dict, close) -> None:
+    """Videos recorded at different frame rates cannot be tracked frame by frame together."""
+    if len(rates) < 2:
+        return
+    items = sorted(rates.items(), key=lambda kv: kv[1])
+    (slow, slow_fps), (fast, fast_fps) = items[0], items[-1]
+    if (fast_fps - slow_fps) / fast_fps > _FPS_TOLERANCE:
+        close()
+        raise FrameSourceError(f"camera '{slow}' runs at {slow_fps:g} fps but camera '{fast}' at {fast_fps:g} fps; "
+                               "frames are matched by number, so convert the videos to one frame rate first "
+                               f"(e.g. ffmpeg -i in.mp4 -r {slow_fps:g} out.mp4)")
