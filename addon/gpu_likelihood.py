@@ -74,8 +74,13 @@ def _private_scene():
 
 def run_in_gpu_context(fn):
     """fn() where the gpu module can draw: directly in the UI, inside the render engine in background."""
+    import threading
+
     import bpy
 
+    if threading.current_thread() is not threading.main_thread():
+        raise GpuUnavailableError("the GPU likelihood runs only on Blender's main thread; track in the "
+                                  "foreground or choose backend fast")
     if not bpy.app.background:
         return fn()
     scene = _private_scene()
