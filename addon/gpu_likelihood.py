@@ -212,7 +212,10 @@ class GlslStatistics:
         if mesh_key != self._mesh_key:
             self._mesh = glsl.pack_mesh(proxy_vertices, proxy_weights, unweighted, faces, face_label,
                                         proxy_weights.shape[1])
+            self._spheres = glsl.bone_spheres(proxy_vertices, proxy_weights, unweighted)
             self._mesh_key = mesh_key
+        boxes = glsl.pack_boxes(glsl.tile_boxes(skin_matrices, armature_matrix, *self._spheres, cameras,
+                                                targets.widths, targets.heights))
         if targets is not self._targets_key:
             self._targets = glsl.pack_targets(targets)
             self._targets_key = targets
@@ -221,7 +224,7 @@ class GlslStatistics:
         sizes[0, :, 1] = targets.heights
         P, C = len(bones), len(cameras)
         H, W = targets.silhouette.shape[1:]
-        job = (bones, glsl.pack_cameras(cameras), sizes, self._targets, self._mesh, P, C, W, H, int(cull))
+        job = (bones, glsl.pack_cameras(cameras), sizes, boxes, self._targets, self._mesh, P, C, W, H, int(cull))
         readback = run_in_gpu_context(lambda: _run(*job))
         return glsl.unpack_statistics(readback, P, C, render.N_STATS)
 
@@ -229,29 +232,30 @@ class GlslStatistics:
 _cache = {}  # GPU objects kept between calls: shaders, batches, render targets, the observed images
 
 
-def _run(bones, cameras, sizes, observed, mesh, P, C, W, H, cull):
+def _run(bones, cameras, sizes, boxes, observed, mesh, P, C, W, H, cull):
     """Inside a GPU context: every pose-view in atlas chunks -> (P*C, 8) floats."""
     import gpu
     from gpu_extras.batch import batch_for_shader
 
-    slots = sum(1 for k in mesh if k.startswith("bone"))
+    slots = sum(1 for k in mesh[0] if k.startswith("bone"))
     if _cache.get("slots") != slots:
         _cache.clear()
         _cache["slots"] = slots
         _cache["draw"] = _draw_shader(slots)
-        _cache["rows"] = _reduce_shader(glsl.ROWS_FRAGMENT_SOURCE, ("labels", "observed", "sizes"),
+        _cache["rows"] = _reduce_shader(glsl.ROWS_FRAGMENT_SOURCE, ("labels", "observed", "sizes", "boxes"),
                           (("INT", "first_tile"), ("INT", "n_views"), ("INT", "tiles_per_row"), ("INT", "tile_w"),
                            ("INT", "tile_h")))
         _cache["tiles"] = _reduce_shader(glsl.TILES_FRAGMENT_SOURCE, ("row_counts", "row_sums"), (("INT", "n_rows"),))
     draw, rows, tiles = _cache["draw"], _cache["rows"], _cache["tiles"]
     if _cache.get("mesh") is not mesh:
         _cache["mesh"] = mesh
-        _cache["mesh_batch"] = batch_for_shader(draw, "TRIS", mesh)
+        attributes, indices = mesh
+        _cache["mesh_batch"] = batch_for_shader(draw, "TRIS", attributes, indices=indices)
         quad = ((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, -1.0), (1.0, 1.0), (-1.0, 1.0))
         _cache["rows_batch"] = batch_for_shader(rows, "TRIS", {"pos": quad})
         _cache["tiles_batch"] = batch_for_shader(tiles, "TRIS", {"pos": quad})
     mesh_batch, rows_batch, tiles_batch = _cache["mesh_batch"], _cache["rows_batch"], _cache["tiles_batch"]
-    bone_tex, camera_tex, size_tex = _texture(bones), _texture(cameras), _texture(sizes)
+    bone_tex, camera_tex, size_tex, box_tex = _texture(bones), _texture(cameras), _texture(sizes), _texture(boxes)
     if _cache.get("observed") is not observed:  # once per frame
         _cache["observed"] = observed
         _cache["observed_tex"] = _texture(observed)
@@ -284,7 +288,9 @@ def _run(bones, cameras, sizes, observed, mesh, P, C, W, H, cull):
             gpu.state.viewport_set(0, 0, atlas_w, atlas_h)
             gpu.state.depth_test_set("LESS")
             gpu.state.depth_mask_set(True)
-            gpu.state.face_culling_set("NONE")
+            # Back-face culling in the rasteriser (half the triangles never set up); the fragment shader's
+            # gl_FrontFacing test states the same rule.
+            gpu.state.face_culling_set({0: "NONE", 1: "BACK", -1: "FRONT"}[cull])
             gpu.state.blend_set("NONE")
             draw.bind()
             draw.uniform_sampler("bones", bone_tex)
@@ -298,12 +304,14 @@ def _run(bones, cameras, sizes, observed, mesh, P, C, W, H, cull):
             mesh_batch.draw_instanced(draw, instance_start=0, instance_count=n)
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)
+            gpu.state.face_culling_set("NONE")
         with rows_fb.bind():
             gpu.state.viewport_set(0, 0, n, H)
             rows.bind()
             rows.uniform_sampler("labels", labels)
             rows.uniform_sampler("observed", observed_tex)
             rows.uniform_sampler("sizes", size_tex)
+            rows.uniform_sampler("boxes", box_tex)
             for name, value in (("first_tile", first), ("n_views", C), ("tiles_per_row", per_row), ("tile_w", W),
                                 ("tile_h", H)):
                 rows.uniform_int(name, value)

@@ -45,11 +45,14 @@ def influence_slots(weights):
 
 
 def pack_mesh(vertices, weights, unweighted, faces, face_label, n_bones):
-    """Unrolled proxy: one vertex per triangle corner, F*3 rows.
+    """The proxy as an indexed mesh whose vertices carry their triangle's part label: a vertex shared by
+    triangles of different parts is repeated once per part (the label must not be interpolated).
 
-    Returns a dict of float32 attribute arrays: 'rest' (N,3), 'label' (N,), 'bone{k}' / 'weight{k}' (N,4)
-    for each influence slot. Unweighted vertices point at bone index n_bones, the armature matrix (they
-    stay where the rest mesh is, as in body.blend_vertices)."""
+    Returns (attributes, indices): float32 arrays 'rest' (N,3), 'label' (N,), 'bone{k}' / 'weight{k}' (N,4)
+    for each influence slot, and (F,3) int32 corner indices in the proxy's triangle order (the depth
+    test's ties keep the first-drawn triangle, as the reference's lowest index). Unweighted vertices point
+    at bone index n_bones, the armature matrix (they stay where the rest mesh is, as in
+    body.blend_vertices)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -65,13 +68,15 @@ def pack_mesh(vertices, weights, unweighted, faces, face_label, n_bones):
     idx[static, 0] = n_bones
     w[static] = 0
     w[static, 0] = 1
-    corner = faces.reshape(-1)
-    out = {"rest": vertices[corner].astype(np.float32),
-           "label": np.repeat(np.asarray(face_label, dtype=np.float32), 3)}
+    labels = np.asarray(face_label, dtype=np.int64)
+    corner_keys = np.stack([faces.reshape(-1), np.repeat(labels, 3)], axis=1)
+    keys, inverse = np.unique(corner_keys, axis=0, return_inverse=True)
+    source = keys[:, 0]
+    out = {"rest": vertices[source].astype(np.float32), "label": keys[:, 1].astype(np.float32)}
     for k in range(slots):
-        out[f"bone{k}"] = np.ascontiguousarray(idx[corner, 4 * k:4 * k + 4])
-        out[f"weight{k}"] = np.ascontiguousarray(w[corner, 4 * k:4 * k + 4])
-    return out
+        out[f"bone{k}"] = np.ascontiguousarray(idx[source, 4 * k:4 * k + 4])
+        out[f"weight{k}"] = np.ascontiguousarray(w[source, 4 * k:4 * k + 4])
+    return out, inverse.reshape(-1, 3).astype(np.int32)
 
 
 def pack_bones(skin_matrices, armature_matrix):
@@ -112,6 +117,70 @@ def pack_targets(targets):
     out[..., 2] = targets.silhouette_dt
     out[..., 3] = targets.edge_dt
     return out.reshape(C * H, W, 4)
+
+
+def bone_spheres(vertices, weights, unweighted):
+    """Per bone (and one more for the unweighted vertices, moved by the armature matrix): the centre (rest)
+    and radius of a sphere holding every vertex the bone moves. A skinned vertex is a weighted mean of its
+    bones' rigid images of it, so it lies in the convex hull of those bones' moved spheres."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)
+    static = np.asarray(unweighted, dtype=bool) if unweighted is not None else np.zeros(len(vertices), bool)
+    centres = np.zeros((weights.shape[1] + 1, 3))
+    radii = np.full(weights.shape[1] + 1, -1.0)  # -1: moves no vertex
+    for b, members in enumerate(list((weights > 0).T & ~static) + [static]):
+        if members.any():
+            pts = vertices[members]
+            centres[b] = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+            radii[b] = np.linalg.norm(pts - centres[b], axis=1).max()
+    return centres, radii
+
+
+def tile_boxes(skin_matrices, armature_matrix, centres, radii, cameras, widths, heights):
+    """(P,C,4) float32 pixel box x0, y0, x1, y1 (inclusive) that holds the pose's template in each view,
+    from the bones' spheres (bone_spheres): the reduction passes scan only these pixels. A view with lens
+    distortion, or a sphere reaching the camera plane, gets the whole image."""
+    M = np.asarray(skin_matrices, dtype=np.float64)
+    P, B = M.shape[:2]
+    M = np.concatenate([M, np.broadcast_to(np.asarray(armature_matrix, dtype=np.float64), (P, 1, 4, 4))], axis=1)
+    used = radii >= 0
+    M, centres, radii = M[:, used], centres[used], radii[used]
+    world = np.einsum("pbij,bj->pbi", M[..., :3, :3], centres) + M[..., :3, 3]  # (P,B',3)
+    stretch = np.linalg.norm(M[..., :3, :3], ord=2, axis=(-2, -1))  # 1 for rigid bones
+    r = radii[None] * stretch
+    boxes = np.zeros((P, len(cameras), 4), dtype=np.float32)
+    for c, cam in enumerate(cameras):
+        w, h = int(widths[c]), int(heights[c])
+        boxes[:, c] = 0, 0, w - 1, h - 1
+        if cam.has_distortion:
+            continue
+        pc = world @ cam.R.T + cam.t  # (P,B',3)
+        z_lo = pc[..., 2] - r
+        ok = np.all(z_lo > 1e-6, axis=1)
+        # u and v are linear-fractional in (x, y, z), so over the sphere's box their extremes are at corners
+        X = np.stack([pc[..., 0] - r, pc[..., 0] + r], axis=-1)[..., :, None, None]
+        Y = np.stack([pc[..., 1] - r, pc[..., 1] + r], axis=-1)[..., None, :, None]
+        Z = np.stack([np.maximum(z_lo, 1e-6), pc[..., 2] + r], axis=-1)[..., None, None, :]
+        K = cam.K
+        u = (K[0, 0] * X + K[0, 1] * Y) / Z + K[0, 2]
+        v = K[1, 1] * Y / Z + K[1, 2]
+        axes = (1, 2, 3, 4)
+        u_lo, u_hi, v_lo, v_hi = u.min(axis=axes), u.max(axis=axes), v.min(axis=axes), v.max(axis=axes)
+        box = np.stack([np.floor(u_lo) - 1, np.floor(v_lo) - 1, np.ceil(u_hi) + 1, np.ceil(v_hi) + 1], axis=1)
+        box = np.clip(box, 0, [w - 1, h - 1, w - 1, h - 1])
+        boxes[ok, c] = box[ok]
+    return boxes
+
+
+BOX_ROW = 1024  # tile boxes per texture row
+
+
+def pack_boxes(boxes):
+    """(P,C,4) tile boxes -> (rows, BOX_ROW, 4) float32 texture rows, tile = pose * C + view."""
+    flat = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
+    out = np.zeros((-(-len(flat) // BOX_ROW) * BOX_ROW, 4), dtype=np.float32)
+    out[:len(flat)] = flat
+    return out.reshape(-1, BOX_ROW, 4)
 
 
 def atlas_layout(n_tiles, tile_w, tile_h, side=ATLAS_SIDE):
@@ -191,10 +260,11 @@ void main() {
 }
 """
 
-ROWS_FRAGMENT_SOURCE = """
-float lab(ivec2 p) { return texelFetch(labels, p, 0).r; }
+ROWS_FRAGMENT_SOURCE = f"""
+#define BOX_ROW {BOX_ROW}
+float lab(ivec2 p) {{ return texelFetch(labels, p, 0).r; }}
 
-void main() {
+void main() {{
   int tile = int(gl_FragCoord.x) + first_tile;
   int row = int(gl_FragCoord.y);
   int pose = tile / n_views;
@@ -202,13 +272,14 @@ void main() {
   ivec2 size = ivec2(texelFetch(sizes, ivec2(view, 0), 0).xy);
   vec4 counts = vec4(0.0);
   vec4 sums = vec4(0.0);
-  if (row < size.y) {
+  vec4 box = texelFetch(boxes, ivec2(tile % BOX_ROW, tile / BOX_ROW), 0);  /* holds the template (tile_boxes) */
+  if (row < size.y && float(row) >= box.y && float(row) <= box.w) {{
     int col = tile - first_tile;
     int tx = col - (col / tiles_per_row) * tiles_per_row;
     int ty = col / tiles_per_row;
     ivec2 origin = ivec2(tx * tile_w, ty * tile_h + row);
     int obs_row = view * tile_h + row;
-    for (int x = 0; x < size.x; x++) {
+    for (int x = int(box.x); x <= int(box.z); x++) {{
       float l = lab(origin + ivec2(x, 0));
       if (l <= 0.0) continue;
       vec4 obs = texelFetch(observed, ivec2(x, obs_row), 0);
@@ -218,11 +289,11 @@ void main() {
                || (row + 1 < size.y && lab(origin + ivec2(x, 1)) != l);
       counts += vec4(1.0, obs.r, edge ? 1.0 : 0.0, edge ? obs.g : 0.0);
       sums += vec4(obs.b, edge ? obs.a : 0.0, 0.0, 0.0);
-    }
-  }
+    }}
+  }}
   counts_out = counts;
   sums_out = sums;
-}
+}}
 """
 
 TILES_FRAGMENT_SOURCE = """
