@@ -130,3 +130,25 @@ def test_auto_does_not_pick_a_software_rasteriser(monkeypatch):
     choice = backend_choice.choose_backend("auto")
     assert choice.used == render.resolve_backend("auto") and "software" in choice.reason
     assert choice.to_dict()["gpu_renderer"].startswith("llvmpipe")
+
+
+def test_tile_boxes_hold_every_template_pixel(subject):
+    """The reduction scans only tile_boxes' pixels: every pixel the reference rasterises must be inside."""
+    from markerless_mocap.core.render import glsl
+
+    body, proxy = subject
+    cams = _cameras(body)
+    cams[1] = cams[1].without_distortion()  # a distorted view gets the whole image; test the bound itself
+    rng = np.random.default_rng(3)
+    poses = _random_poses(body, rng, 8)
+    boxes = glsl.tile_boxes(body.skinning_matrices(poses), body.skeleton.armature_matrix,
+                            *glsl.bone_spheres(proxy.vertices, proxy.weights, proxy.unweighted), cams,
+                            [c.width for c in cams], [c.height for c in cams])
+    uv, z = render.project_views(proxy.deform(body, poses), cams)
+    labels = (proxy.face_part + 1).astype(np.int16)
+    for p in range(len(poses)):
+        for c, cam in enumerate(cams):
+            ys, xs = np.nonzero(reference.rasterize(uv[p, c], z[p, c], proxy.faces, labels, cam.width, cam.height))
+            x0, y0, x1, y1 = boxes[p, c]
+            assert xs.size and xs.min() >= x0 and xs.max() <= x1 and ys.min() >= y0 and ys.max() <= y1
+            assert (x1 - x0 + 1) * (y1 - y0 + 1) < 0.6 * cam.width * cam.height  # and it does cut the work

@@ -33,10 +33,6 @@ def register_gpu(measure_poses):
     _gpu_measure = measure_poses
 
 
-def gpu_registered():
-    return _gpu_measure is not None
-
-
 def cpu_backend(backend="auto"):
     """The CPU path a backend uses for what it does not compute itself ("gpu" -> fast, else numpy)."""
     return resolve_backend("auto" if backend == "gpu" else backend)
@@ -99,7 +95,7 @@ def measure_vertices(vertices, cameras, faces, face_label, targets, need_chamfer
     return reference.statistics(uv, z, faces, face_label, targets, need_chamfer, n_parts, cull)
 
 
-__all__ = ["statistics", "measure_vertices", "measure_poses", "resolve_backend", "register_gpu", "gpu_registered",
+__all__ = ["statistics", "measure_vertices", "measure_poses", "resolve_backend", "register_gpu",
            "cpu_backend", "BackendUnavailableError", "FrameTargets", "RenderInputError", "project_views", "rasterize",
            "render_view", "boundary_mask", "chamfer_34", "ab_to_bins", "N_STATS", "N_BINS", "TEMPLATE", "OVERLAP",
            "SUM_DI", "SUM_DT", "BOUNDARY", "BOUNDARY_OFF", "SUM_EDGE_DT", "BACKENDS"]

@@ -146,7 +146,11 @@ def tile_boxes(skin_matrices, armature_matrix, centres, radii, cameras, widths, 
     used = radii >= 0
     M, centres, radii = M[:, used], centres[used], radii[used]
     world = np.einsum("pbij,bj->pbi", M[..., :3, :3], centres) + M[..., :3, 3]  # (P,B',3)
-    stretch = np.linalg.norm(M[..., :3, :3], ord=2, axis=(-2, -1))  # 1 for rigid bones
+    # How much a bone may stretch a sphere: sqrt of the Gram matrix's largest eigenvalue, bounded by its
+    # largest absolute row sum (Gershgorin); exactly 1 for rigid bones, and no SVD per bone.
+    A = M[..., :3, :3]
+    gram = np.einsum("pbji,pbjk->pbik", A, A)
+    stretch = np.sqrt(np.abs(gram).sum(axis=-1).max(axis=-1))
     r = radii[None] * stretch
     boxes = np.zeros((P, len(cameras), 4), dtype=np.float32)
     for c, cam in enumerate(cameras):
