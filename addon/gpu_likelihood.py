@@ -232,7 +232,23 @@ class GlslStatistics:
 _cache = {}  # GPU objects kept between calls: shaders, batches, render targets, the observed images
 
 
-def _run(bones, cameras, sizes, boxes, observed, mesh, P, C, W, H, cull):
+def _run(*job):
+    """_passes with the GPU state it changes put back (in the UI, the next viewport draw expects it)."""
+    import gpu
+
+    saved = (gpu.state.viewport_get(), gpu.state.depth_test_get(), gpu.state.depth_mask_get(),
+             gpu.state.blend_get())
+    try:
+        return _passes(*job)
+    finally:
+        gpu.state.viewport_set(*saved[0])
+        gpu.state.depth_test_set(saved[1])
+        gpu.state.depth_mask_set(saved[2])
+        gpu.state.blend_set(saved[3])
+        gpu.state.face_culling_set("NONE")
+
+
+def _passes(bones, cameras, sizes, boxes, observed, mesh, P, C, W, H, cull):
     """Inside a GPU context: every pose-view in atlas chunks -> (P*C, 8) floats."""
     import gpu
     from gpu_extras.batch import batch_for_shader
@@ -243,9 +259,10 @@ def _run(bones, cameras, sizes, boxes, observed, mesh, P, C, W, H, cull):
         _cache["slots"] = slots
         _cache["draw"] = _draw_shader(slots)
         _cache["rows"] = _reduce_shader(glsl.ROWS_FRAGMENT_SOURCE, ("labels", "observed", "sizes", "boxes"),
-                          (("INT", "first_tile"), ("INT", "n_views"), ("INT", "tiles_per_row"), ("INT", "tile_w"),
-                           ("INT", "tile_h")))
-        _cache["tiles"] = _reduce_shader(glsl.TILES_FRAGMENT_SOURCE, ("row_counts", "row_sums"), (("INT", "n_rows"),))
+                                        (("INT", "first_tile"), ("INT", "n_views"), ("INT", "tiles_per_row"),
+                                         ("INT", "tile_w"), ("INT", "tile_h")))
+        _cache["tiles"] = _reduce_shader(glsl.TILES_FRAGMENT_SOURCE, ("row_counts", "row_sums"),
+                                         (("INT", "n_rows"),))
     draw, rows, tiles = _cache["draw"], _cache["rows"], _cache["tiles"]
     if _cache.get("mesh") is not mesh:
         _cache["mesh"] = mesh
