@@ -42,7 +42,7 @@ def add_tracking_options(p):
 
 
 def settings_from_args(args, backend=None):
-    """TrackingSettings from the command line; `backend` is the resolved backend (else the one asked for)."""
+    """TrackingSettings from the command line; `backend`: the resolved backend (else the one asked for)."""
     return TrackingSettings(algorithm=args.algorithm, likelihood=args.likelihood, particles=args.particles,
                             iterations=args.iterations, seed=args.seed, backend=backend or args.backend,
                             background=args.background,
@@ -129,19 +129,20 @@ def run(args):
 
     scene = open_subject(args.scene)
     try:
-        choice = choose_backend(args.backend)
-    except BackendUnavailableError as exc:
-        print(f"markerless_mocap track: {exc}", file=sys.stderr)
-        return 2
-    print(f"likelihood backend: {choice.used} ({choice.reason})", file=sys.stderr)
-    try:
         armature = find_armature(scene, args.armature)
-        session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args, choice.used),
+        session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args),
                                frames=parse_frames(args.frames), resume=args.resume,
                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
     except (SubjectError, ValueError, FileNotFoundError, ResultWriteError) as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2
+    try:  # after the inputs are checked (their errors come first, alone); the tracker is built on the first frame
+        choice = choose_backend(args.backend)
+    except BackendUnavailableError as exc:
+        print(f"markerless_mocap track: {exc}", file=sys.stderr)
+        return 2
+    print(f"likelihood backend: {choice.used} ({choice.reason})", file=sys.stderr)
+    session.settings.backend = choice.used
     session.writer.info["backend"] = choice.to_dict()  # report.json: what was asked for, what ran, why
     if args.resume:
         session.key_all()
