@@ -229,6 +229,18 @@ class GlslStatistics:
         return glsl.unpack_statistics(readback, P, C, render.N_STATS)
 
 
+def _atlas_side():
+    """Inside a GPU context: the atlas side for this GPU (glsl.ATLAS_SIDE_GPU on hardware, within its limit)."""
+    import gpu
+
+    if "atlas_side" not in _side:
+        hardware = not is_software(gpu.platform.renderer_get())
+        limit = gpu.capabilities.max_texture_size_get()
+        _side["atlas_side"] = min(limit, glsl.ATLAS_SIDE_GPU if hardware else glsl.ATLAS_SIDE)
+    return _side["atlas_side"]
+
+
+_side = {}
 _cache = {}  # GPU objects kept between calls: shaders, batches, render targets, the observed images
 
 
@@ -279,7 +291,7 @@ def _passes(bones, cameras, sizes, boxes, observed, mesh, P, C, W, H, cull):
     observed_tex = _cache["observed_tex"]
 
     n_tiles = P * C
-    per_row, n_rows, per_atlas = glsl.atlas_layout(n_tiles, W, H)
+    per_row, n_rows, per_atlas = glsl.atlas_layout(n_tiles, W, H, _atlas_side())
     atlas_w, atlas_h = per_row * W, n_rows * H
     key = (atlas_w, atlas_h, per_atlas, H)
     if _cache.get("targets_key") != key:

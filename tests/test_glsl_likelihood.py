@@ -82,6 +82,26 @@ def test_glsl_statistics_equal_the_reference_on_random_poses(gpu_backend, subjec
         assert np.all(np.abs(got - ref) <= 0.01 * np.maximum(ref, 100)), (column, np.abs(got - ref).max())
 
 
+def test_batches_larger_than_one_atlas_are_drawn_in_chunks(gpu_backend, subject, monkeypatch):
+    """A batch that needs several atlases (here 4 tiles each) gives what one atlas gives."""
+    from markerless_mocap.addon import gpu_likelihood
+
+    body, proxy = subject
+    cams = _cameras(body)
+    rng = np.random.default_rng(5)
+    targets = random_blob_targets(cams, rng)
+    poses = _random_poses(body, rng, 5)
+    labels = (proxy.face_part + 1).astype(np.int16)
+    whole, _ = render.measure_poses(body, proxy, poses, cams, proxy.faces, labels, targets, need_chamfer=False,
+                                    backend="gpu")
+    monkeypatch.setattr(gpu_likelihood, "_side", {"atlas_side": 700})  # 2 x 2 tiles of 320x240
+    chunked, _ = render.measure_poses(body, proxy, poses, cams, proxy.faces, labels, targets, need_chamfer=False,
+                                      backend="gpu")
+    assert whole[..., render.TEMPLATE].min() > 300
+    # the same pixels, up to a pixel centre on a triangle edge: window coordinates round differently per tile
+    assert np.allclose(whole, chunked, rtol=1e-3, atol=3)
+
+
 def test_glsl_energies_equal_the_reference_within_one_percent(gpu_backend, subject):
     """EnergyModel on the GLSL path (called repeatedly: GPU objects are kept between calls) against the
     NumPy reference, silhouette, edge and Chamfer edge terms; a likelihood with a Chamfer silhouette

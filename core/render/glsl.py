@@ -25,9 +25,10 @@ import numpy as np
 
 from .reference import BOUNDARY, BOUNDARY_OFF, OVERLAP, SUM_DI, SUM_EDGE_DT, TEMPLATE, Z_NEAR
 
-# Atlas side the host aims for: big enough for ~200 tiles of 320x240 per draw, small enough that the
-# label and depth textures stay at 64 MB each.
+# Atlas side: on a software rasteriser, ~200 tiles of 320x240 per draw with label and depth textures of
+# 64 MB each; on a GPU, a whole batch of 200 poses x 4 views in one draw (256 MB each) [DESIGN].
 ATLAS_SIDE = 4096
+ATLAS_SIDE_GPU = 8192
 CAMERA_TEXELS = 8  # R|t (3 texels), fx fy cx cy, skew + distortion flag, 12 distortion coefficients (3 texels)
 # Order of the 8 floats the tile pass writes per pose-view (two RGBA targets).
 READBACK_COLUMNS = (TEMPLATE, OVERLAP, BOUNDARY, BOUNDARY_OFF, SUM_DI, SUM_EDGE_DT)
@@ -318,6 +319,6 @@ FULLSCREEN_VERTEX_SOURCE = """
 void main() { gl_Position = vec4(pos, 0.0, 1.0); }
 """
 
-__all__ = ["ATLAS_SIDE", "GlslInputError", "influence_slots", "pack_mesh", "pack_bones", "pack_cameras",
+__all__ = ["ATLAS_SIDE", "ATLAS_SIDE_GPU", "GlslInputError", "influence_slots", "pack_mesh", "pack_bones", "pack_cameras",
            "pack_targets", "atlas_layout", "unpack_statistics", "draw_vertex_source", "DRAW_FRAGMENT_SOURCE",
            "ROWS_FRAGMENT_SOURCE", "TILES_FRAGMENT_SOURCE", "FULLSCREEN_VERTEX_SOURCE", "Z_NEAR"]
