@@ -121,28 +121,27 @@ def run_session(session, progress=None, log=print):
 
 def run(args):
     from ..addon.scene_bridge import SubjectError, find_armature
-    from ..core.results import ResultWriteError
-    from .track_session import TrackSession
-
     from ..core.render import BackendUnavailableError
+    from ..core.results import ResultWriteError
     from .backend_choice import choose_backend
+    from .track_session import TrackSession
 
     scene = open_subject(args.scene)
     try:
+        choice = choose_backend(args.backend)  # before the session: a resumed run checks its settings
+    except BackendUnavailableError as exc:
+        print(f"markerless_mocap track: {exc}", file=sys.stderr)
+        return 2
+    try:
         armature = find_armature(scene, args.armature)
-        session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args),
+        session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args, choice.used),
                                frames=parse_frames(args.frames), resume=args.resume,
                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
     except (SubjectError, ValueError, FileNotFoundError, ResultWriteError) as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2
-    try:  # after the inputs are checked (their errors come first, alone); the tracker is built on the first frame
-        choice = choose_backend(args.backend)
-    except BackendUnavailableError as exc:
-        print(f"markerless_mocap track: {exc}", file=sys.stderr)
-        return 2
+    # printed once the inputs are checked: a bad input's message stays the only line
     print(f"likelihood backend: {choice.used} ({choice.reason})", file=sys.stderr)
-    session.settings.backend = choice.used
     session.writer.info["backend"] = choice.to_dict()  # report.json: what was asked for, what ran, why
     if args.resume:
         session.key_all()
