@@ -6,7 +6,7 @@ Where the GPU is reachable:
   `bl_use_gpu_context`: each batch is handed to `bpy.ops.render.render()` on a small private scene whose
   engine runs it (about 3 ms of overhead per batch on llvmpipe).
 
-`install()` registers the path with core.render as backend "gpu"; the engine itself never imports bpy.
+`install()` registers the path with core.render as backend "gpu" (core never imports bpy).
 Main thread only, like everything that touches bpy.
 """
 from __future__ import annotations
@@ -208,12 +208,13 @@ class GlslStatistics:
                  face_label, cameras, targets, cull=0):
         """(P,C,N_STATS) statistics; the columns the GLSL path does not compute (SUM_DT) are 0."""
         bones = glsl.pack_bones(skin_matrices, armature_matrix)
-        mesh_key = (id(proxy_vertices), id(faces), len(faces), proxy_weights.shape)
-        if mesh_key != self._mesh_key:
+        mesh_key = [np.asarray(a) for a in (proxy_vertices, proxy_weights, faces, face_label)]
+        if self._mesh_key is None or not all(a.shape == b.shape and np.array_equal(a, b)
+                                             for a, b in zip(mesh_key, self._mesh_key)):
             self._mesh = glsl.pack_mesh(proxy_vertices, proxy_weights, unweighted, faces, face_label,
                                         proxy_weights.shape[1])
             self._spheres = glsl.bone_spheres(proxy_vertices, proxy_weights, unweighted)
-            self._mesh_key = mesh_key
+            self._mesh_key = [a.copy() for a in mesh_key]
         boxes = glsl.pack_boxes(glsl.tile_boxes(skin_matrices, armature_matrix, *self._spheres, cameras,
                                                 targets.widths, targets.heights))
         if targets is not self._targets_key:
