@@ -98,10 +98,16 @@ def run_in_gpu_context(fn):
 
 
 def release():
-    """Remove the private scene (so it is not saved with the user's file) and the engine."""
+    """Free the kept GPU objects (inside a GPU context), then remove the private scene (so it is not saved
+    with the user's file) and the engine."""
     import bpy
 
     global _engine
+    if _cache:
+        try:
+            run_in_gpu_context(_cache.clear)
+        except GpuUnavailableError:
+            _cache.clear()
     scene = bpy.data.scenes.get(SCENE_NAME)
     if scene is not None:
         camera = scene.camera
@@ -374,5 +380,20 @@ def measure_poses(body, proxy, poses, cameras, faces, face_label, targets, cull=
 
 
 def install():
-    """Make backend "gpu" available to core.render in this process."""
+    """Make backend "gpu" available to core.render in this process; its GPU objects are freed at exit."""
+    import atexit
+
+    if not _installed:
+        atexit.register(_release_at_exit)
+        _installed.append(True)
     render.register_gpu(measure_poses)
+
+
+_installed = []
+
+
+def _release_at_exit():
+    try:
+        release()
+    except Exception:  # noqa: BLE001  (Blender may already be shutting its data down: nothing left to free)
+        pass
