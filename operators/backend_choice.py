@@ -73,6 +73,20 @@ class BackendChoice:
     reason: str
     renderer: str = ""
 
+    @property
+    def summary(self):
+        """A few words for the Track panel, e.g. 'fast (the GPU is llvmpipe, software)'."""
+        name = self.renderer.split(" (")[0]
+        if self.requested == self.used and self.requested != "auto":
+            why = f"asked for, on {name}" if name else "asked for"
+        elif self.used == "gpu":
+            why = f"GPU: {name}"
+        elif name:
+            why = f"the GPU is {name}, software"
+        else:
+            why = "no usable GPU"
+        return f"{self.used} ({why})"
+
     def to_dict(self):
         return {"requested": self.requested, "used": self.used, "reason": self.reason,
                 **({"gpu_renderer": self.renderer} if self.renderer else {})}

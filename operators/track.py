@@ -70,7 +70,7 @@ def build_session(context, log=None, step=None):
     except BackendUnavailableError as exc:
         raise TrackSetupError(str(exc)) from exc
     settings.backend = choice.used
-    props.backend_used = f"{choice.used} ({choice.reason})"
+    props.backend_used = choice.summary  # the whole reason goes to report.json
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
     session = _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
                                frames=props.frame_range(), resume=props.resume, log=log, step=step,

@@ -150,6 +150,7 @@ def test_auto_does_not_pick_a_software_rasteriser(monkeypatch):
     choice = backend_choice.choose_backend("auto")
     assert choice.used == render.resolve_backend("auto") and "software" in choice.reason
     assert choice.to_dict()["gpu_renderer"].startswith("llvmpipe")
+    assert choice.summary == f"{choice.used} (the GPU is llvmpipe, software)"  # what the Track panel shows
 
 
 def test_tile_boxes_hold_every_template_pixel(subject):
