@@ -93,6 +93,8 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         settings.prop(props, "seed")
         settings.prop(props, "refine")
         settings.prop(props, "backend")
+        if props.backend_used:  # what the last Track chose (auto probes the GPU), wrapped: a label does not wrap
+            _wrapped(settings, f"Using: {props.backend_used}", context, icon="INFO")
         settings.prop(props, "use_frame_range")
         rng = settings.column(align=True)
         rng.enabled = props.use_frame_range

@@ -33,9 +33,12 @@ LIKELIHOODS = (
 )
 
 BACKENDS = (
-    ("auto", "Auto", "Use the fast compiled path when it works on this machine, NumPy otherwise"),
+    ("auto", "Auto", "The GPU (GLSL) on a hardware GPU, else the fast compiled CPU path, else NumPy; "
+                     "the GPU is probed in a separate process first"),
     ("numpy", "NumPy", "Reference implementation: slow, always available"),
     ("fast", "Fast", "Compiled CPU rasteriser (numba)"),
+    ("gpu", "GPU", "GLSL likelihood on the GPU through Blender's gpu module (tracking then runs in the "
+                   "foreground: the GPU is reachable only from Blender's main thread)"),
 )
 
 UNITS = (
@@ -101,6 +104,8 @@ class MocapSettings(bpy.types.PropertyGroup):
     preparing: BoolProperty(name="Preparing", default=False,
                             description="The one-off preparation before the first frame is running")
     last_error: StringProperty(name="Last Error")
+    backend_used: StringProperty(name="Backend Used",
+                                 description="The backend the last Track run chose, and why (also in report.json)")
     frames_solved: IntProperty(name="Frames Solved", default=0)
     frames_total: IntProperty(name="Frames To Solve", default=0)
     seconds_per_frame: FloatProperty(name="Seconds per Frame", default=0.0, precision=2)

@@ -370,9 +370,9 @@ class EnergyModel:
         if self.targets is None:
             raise LikelihoodError("no frame: call set_frame(features) before evaluating poses")
         poses = self._check_poses(poses)
-        vertices = self.proxy.deform(self.body, poses)
-        return render.measure_vertices(vertices, self.cameras, self.faces, self.face_label, self.targets,
-                                       need_chamfer, self.n_parts if need_color else 0, self.cull, self.backend)
+        return render.measure_poses(self.body, self.proxy, poses, self.cameras, self.faces, self.face_label,
+                                    self.targets, need_chamfer, self.n_parts if need_color else 0, self.cull,
+                                    self.backend)
 
     def _check_reference(self, which):
         if which == "silh" and np.any(self.reference_area <= 0):

@@ -5,9 +5,17 @@ Scene: the sample subject (sample_scenes/walk/subject.blend or --subject). With 
 otherwise 4 synthetic 640x480 cameras ring the subject and the "observation" is the body itself,
 rendered by the reference path at a known pose (its silhouette, and its part boundaries as edges).
 The poses evaluated scatter around that pose. The reference path is timed on a few poses and scaled up.
-Ends with one JSON line: reference_s, fast_s, ratio, fk_lbs_s, diffusion_vga_s, poses, views, resolution, backend, ...
+Then, per backend that runs here (numpy, fast, gpu: the GLSL path, when the GPU probe passes): energy
+evaluations per second for batches of --poses (the paper's 200 particles; 15 iterations make 3000
+evaluations per frame), and seconds per frame of the whole default pipeline (learned evidence, ISA 200 x 15,
+the local fit; `lsilh+edge+kp`) tracked from the ground truth's pose on --pipeline-frames frames of the walk
+capture; ratios against the NumPy reference.
+Ends with one JSON line: reference_s, fast_s, ratio, fk_lbs_s, diffusion_vga_s, poses, views, resolution, backend,
+..., and per backend `numpy`, `fast`, `gpu` ({evaluations_per_s, likelihood_s_per_frame, pipeline_s_per_frame,
+*_vs_numpy}), `auto_backend` and `default_s_per_frame` (the default pipeline on the backend auto picks).
 """
 import json
+import os
 import sys
 import time
 import warnings
@@ -34,6 +42,12 @@ def add_arguments(parser):
     parser.add_argument("--repeats", type=int, default=7, help="timed repeats; the fastest counts (default 7)")
     parser.add_argument("--backend", default="auto", choices=["auto", "fast", "numpy"],
                         help="backend timed as the fast path (default auto)")
+    parser.add_argument("--pipeline-frames", type=int, default=2,
+                        help="frames of the default pipeline timed per backend after the start frame (default 2; "
+                             "0 skips the pipeline timing)")
+    parser.add_argument("--iterations", type=int, default=15,
+                        help="annealing iterations per frame for the per-frame figures (default 15: 200 x 15 = "
+                             "the paper's 3000 evaluations)")
 
 
 def _threads():
@@ -140,6 +154,103 @@ def _learned_evidence_seconds(capture_dir, cameras, body, pose, repeats):
     return _best(lambda: locate(model, images, boxes), repeats)
 
 
+def _gpu_available():
+    """Install the GLSL backend if the GPU probe (a subprocess) passes; (available, renderer or reason)."""
+    from ..core.render import BackendUnavailableError
+    from .backend_choice import choose_backend
+
+    try:
+        return True, choose_backend("gpu").renderer
+    except BackendUnavailableError as exc:
+        return False, str(exc)
+
+
+def _pipeline_seconds(body, capture_dir, backend, n_frames, particles, iterations):
+    """Seconds per frame of the default pipeline (TrackingSettings defaults: lsilh+edge+kp, ISA, the local
+    fit) on `backend`, tracked from the ground truth's pose at frame 0 over frames 1..n_frames."""
+    from ..core.capture.capture import load_capture
+    from ..core.tracking import Tracker, TrackingSettings
+    from .cmd_compare import true_first_pose
+    from .track_session import build_motion_models
+
+    capture = load_capture(capture_dir)
+    try:
+        prior, dynamics = build_motion_models(body, capture_dir, capture.frames.fps)
+        settings = TrackingSettings(backend=backend, particles=particles, iterations=iterations)
+        tracker = Tracker(body, capture, settings, prior=prior, dynamics=dynamics)
+        tracker.initialise(0, initial_pose=true_first_pose(body, Path(capture_dir) / "gt_joints.npz", 0))
+        seconds, evaluations = [], []
+        for frame in range(1, n_frames + 1):
+            t = time.perf_counter()
+            est = tracker.track(frame)
+            seconds.append(time.perf_counter() - t)
+            evaluations.append(est.evaluations)
+        return float(np.mean(seconds)), float(np.mean(evaluations)), settings
+    finally:
+        capture.close()
+
+
+def backend_table(body, proxy, cameras, feats, observed, poses, args):
+    """Per backend: evaluations per second (poses x views per batch) and seconds per frame of the default
+    pipeline. Returns {backend: figures} and the backend auto picks."""
+    from ..core import likelihood as lk
+    from .backend_choice import choose_backend
+
+    backends = ["numpy", "fast"]
+    gpu_ok, gpu_note = _gpu_available()
+    if gpu_ok:
+        backends.append("gpu")
+        print(f"GLSL path: Blender's gpu module on {gpu_note}")
+    else:
+        print(f"GLSL path not timed: {gpu_note}")
+    auto = choose_backend("auto")
+    print(f"backend auto picks here: {auto.used} ({auto.reason})")
+    n_per_frame = args.poses * args.iterations
+    table = {}
+    for backend in backends:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*anatomical prior.*")
+            model = lk.EnergyModel(body, proxy, cameras, args.likelihood, scale=fast_scale(args), backend=backend)
+        model.set_reference_pose(lk.default_pose_at(body, observed))
+        model.set_frame(feats)
+        batch = poses if backend != "numpy" else poses[:min(args.reference_poses, len(poses))]
+        model(batch)  # warm up (JIT, shaders)
+        wall = _best(lambda: model(batch), max(1, min(3, args.repeats)) if backend == "numpy" else args.repeats)
+        cpu0 = time.process_time()
+        model(batch)
+        cpu = time.process_time() - cpu0
+        per_s = len(batch) / wall
+        row = {"evaluations_per_s": round(per_s, 1), "likelihood_s_per_frame": round(n_per_frame / per_s, 3),
+               "likelihood_cpu_s_per_batch": round(cpu * len(poses) / len(batch), 4)}
+        if args.pipeline_frames > 0 and args.capture and (Path(args.capture) / "gt_joints.npz").is_file():
+            sec, evals, settings = _pipeline_seconds(body, args.capture, backend, args.pipeline_frames, args.poses,
+                                                     args.iterations)
+            row["pipeline_s_per_frame"] = round(sec, 3)
+            row["pipeline_evaluations_per_frame"] = evals
+        table[backend] = row
+    base = table["numpy"]
+    for backend, row in table.items():
+        row["evaluations_vs_numpy"] = round(row["evaluations_per_s"] / base["evaluations_per_s"], 2)
+        if "pipeline_s_per_frame" in row:
+            row["pipeline_vs_numpy"] = round(base["pipeline_s_per_frame"] / row["pipeline_s_per_frame"], 2)
+    views = len(cameras)
+    print(f"per backend, {args.likelihood}, {views} views, batches of {args.poses} poses; "
+          f"{n_per_frame} evaluations per frame ({args.poses} x {args.iterations}); default pipeline "
+          f"(lsilh+edge+kp, ISA {args.poses} x {args.iterations} + local fit) over {args.pipeline_frames} frames:")
+    for backend, row in table.items():
+        pipe = (f"; default pipeline {row['pipeline_s_per_frame']:.2f} s/frame "
+                f"({row['pipeline_vs_numpy']:.1f}x numpy)") if "pipeline_s_per_frame" in row else ""
+        print(f"  {backend:5s}: {row['evaluations_per_s']:8.0f} evaluations/s ({row['evaluations_vs_numpy']:.1f}x "
+              f"numpy) = {row['likelihood_s_per_frame']:.2f} s of likelihood per frame{pipe}")
+    return table, auto.used
+
+
+def fast_scale(args):
+    from ..core import likelihood as lk
+
+    return lk.ENERGY_SCALE if args.scale is None else args.scale
+
+
 def synthetic_features(model, pose):
     from ..core.features.view_features import ViewFeatures, distance_to_mask
     from ..core.features.view_features import EDGE_DT_CAP_PX
@@ -227,7 +338,14 @@ def run(args):
     learned = _learned_evidence_seconds(args.capture, cameras, body, observed, args.repeats)
     print(f"learned evidence (BlazePose crops, landmarks and person masks), {len(cameras)} views: "
           f"{learned * 1e3:.0f} ms per frame")
-    print(json.dumps({"learned_evidence_s": round(learned, 4), "reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
+    table, auto_backend = backend_table(body, proxy, cameras, feats, observed, poses, args)
+    default = table.get(auto_backend, {}).get("pipeline_s_per_frame")
+    if default is not None:
+        print(f"default pipeline at the paper's budget on the backend auto picks ({auto_backend}): "
+              f"{default:.2f} s per frame")
+    print(json.dumps({**table, "auto_backend": auto_backend, "default_s_per_frame": default,
+                      "load_average": [round(x, 2) for x in os.getloadavg()],
+                      "learned_evidence_s": round(learned, 4), "reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
                       "fk_lbs_s": round(fk, 4), "diffusion_vga_s": round(diffusion, 4), "fast_cpu_s": round(fast_cpu, 4), "poses": args.poses, "views": len(cameras),
                       "resolution": f"{w}x{h}", "backend": backend, "likelihood": args.likelihood,
                       "reference_poses_timed": n_ref, "energies_agree": bool(agree), "threads": _threads(),

@@ -59,7 +59,8 @@ def add_arguments(p):
     p.add_argument("--rows", help="subset of rows by algorithm:likelihood, e.g. isa:silh+edge,apf:silhch+color; "
                                   "isa+icp:silh+edge adds the local ICP refinement; isa:silh+edge@100x30 runs "
                                   "100 particles x 30 iterations (the same budget, split differently)")
-    p.add_argument("--backend", default="auto", choices=("auto", "numpy", "fast"))
+    p.add_argument("--backend", default="auto", choices=("auto", "numpy", "fast", "gpu"),
+                   help="likelihood backend, as for track (auto: gpu on a hardware GPU, else fast)")
     p.add_argument("--start", choices=("search", "truth"), default="search",
                    help="common initial pose: a global search on the first frame (default, as the paper) or the "
                         "ground truth's pose (fitted to its joints; separates tracking from initialisation)")
@@ -104,6 +105,16 @@ def run(args):
     from ..core.capture.capture import load_capture
     from .track_session import build_motion_models
 
+    from ..core.render import BackendUnavailableError
+    from .backend_choice import choose_backend
+
+    try:
+        choice = choose_backend(args.backend)
+    except BackendUnavailableError as exc:
+        print(f"markerless_mocap compare: {exc}", file=sys.stderr)
+        return 2
+    print(f"likelihood backend: {choice.used} ({choice.reason})", file=sys.stderr)
+    args.backend = choice.used
     capture_dir = args.capture
     scene = open_subject(args.scene or capture_dir / "subject.blend")
     truth = args.truth or capture_dir / "gt_joints.npz"

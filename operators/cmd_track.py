@@ -35,18 +35,17 @@ def add_tracking_options(p):
     p.add_argument("--refine", choices=("icp", "none"), default="icp",
                    help="local fit of the silhouette outlines after the search (default: icp; none = plain optimiser)")
     p.add_argument("--backend", choices=("auto", "numpy", "fast", "gpu"), default="auto",
-                   help="likelihood backend: fast (numba CPU), numpy (reference), gpu (falls back to fast)")
+                   help="likelihood backend: fast (numba CPU), numpy (reference), gpu (GLSL via Blender's gpu "
+                        "module; an error if it cannot start), auto (gpu on a hardware GPU, else fast)")
     p.add_argument("--background", choices=("auto", "plate", "median", "mog2", "knn"), default="auto",
                    help="background model: plate if the capture has background/<cam>.png, else temporal median")
 
 
-def settings_from_args(args):
-    backend = "fast" if args.backend == "gpu" else args.backend
-    if args.backend == "gpu":
-        print("markerless_mocap: the GLSL backend is not available in this build; using the fast CPU path",
-              file=sys.stderr)
+def settings_from_args(args, backend=None):
+    """TrackingSettings from the command line; `backend`: the resolved backend (else the one asked for)."""
     return TrackingSettings(algorithm=args.algorithm, likelihood=args.likelihood, particles=args.particles,
-                            iterations=args.iterations, seed=args.seed, backend=backend, background=args.background,
+                            iterations=args.iterations, seed=args.seed, backend=backend or args.backend,
+                            background=args.background,
                             refine=args.refine)
 
 
@@ -122,18 +121,28 @@ def run_session(session, progress=None, log=print):
 
 def run(args):
     from ..addon.scene_bridge import SubjectError, find_armature
+    from ..core.render import BackendUnavailableError
     from ..core.results import ResultWriteError
+    from .backend_choice import choose_backend
     from .track_session import TrackSession
 
     scene = open_subject(args.scene)
     try:
+        choice = choose_backend(args.backend)  # before the session: a resumed run checks its settings
+    except BackendUnavailableError as exc:
+        print(f"markerless_mocap track: {exc}", file=sys.stderr)
+        return 2
+    try:
         armature = find_armature(scene, args.armature)
-        session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args),
+        session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args, choice.used),
                                frames=parse_frames(args.frames), resume=args.resume,
                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
     except (SubjectError, ValueError, FileNotFoundError, ResultWriteError) as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2
+    # printed once the inputs are checked: a bad input's message stays the only line
+    print(f"likelihood backend: {choice.used} ({choice.reason})", file=sys.stderr)
+    session.writer.info["backend"] = choice.to_dict()  # report.json: what was asked for, what ran, why
     if args.resume:
         session.key_all()
     try:
@@ -145,6 +154,9 @@ def run(args):
     except ResultWriteError as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 1
+    if choice.used == "gpu":  # its private render scene must not be saved in tracked.blend
+        from ..addon import gpu_likelihood
+        gpu_likelihood.release()
     written = session.finish(export=not args.no_export, overlays=not args.no_overlays,
                              save_blend=not args.no_export)
     print(f"tracked {session.n_done} frames -> {args.out}", file=sys.stderr)

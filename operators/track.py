@@ -61,12 +61,24 @@ def build_session(context, log=None, step=None):
     if not props.capture_dir:
         raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
     armature = subject_armature(context)
+    from ..core.render import BackendUnavailableError
+    from .backend_choice import choose_backend
+
     settings = props.tracking_settings()
-    settings.backend = effective_backend(context, props.backend)
+    try:
+        choice = choose_backend(effective_backend(context, props.backend))
+    except BackendUnavailableError as exc:
+        raise TrackSetupError(str(exc)) from exc
+    settings.backend = choice.used
+    props.backend_used = choice.summary  # the whole reason goes to report.json
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
-    return _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
-                            frames=props.frame_range(), resume=props.resume, log=log, step=step,
-                            units=None if props.units == "auto" else props.units)
+    session = _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
+                               frames=props.frame_range(), resume=props.resume, log=log, step=step,
+                               units=None if props.units == "auto" else props.units)
+    writer = getattr(session, "writer", None)
+    if writer is not None:
+        writer.info["backend"] = choice.to_dict()  # report.json
+    return session
 
 
 class TrackJob:
@@ -316,6 +328,9 @@ class MOCAP_OT_track(bpy.types.Operator):
         job, session = self._begin(context)
         if job is None:
             return {"CANCELLED"}
+        return self._run_foreground(context, job, session)
+
+    def _run_foreground(self, context, job, session):
         interactive = not bpy.app.background
 
         def on_frame(estimate):
@@ -341,6 +356,9 @@ class MOCAP_OT_track(bpy.types.Operator):
         job, session = self._begin(context)
         if job is None:
             return {"CANCELLED"}
+        if getattr(getattr(session, "settings", None), "backend", "") == "gpu":
+            # bpy's gpu module works only on the main thread: solve in the foreground (progress bar, no Esc).
+            return self._run_foreground(context, job, session)
         self._job = job
         job.start(session)
         wm = context.window_manager

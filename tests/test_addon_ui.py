@@ -357,6 +357,24 @@ def test_track_execute_keys_every_frame_and_finishes(fake_track):
     assert (m.frames_solved, m.frames_total, m.progress, m.is_tracking) == (3, 3, pytest.approx(1.0), False)
     assert m.last_output == str(tmp_path / "out") and m.last_error == ""
     assert m.seconds_per_frame == pytest.approx(0.01)
+    assert m.backend_used.startswith("numpy (")  # the Track panel shows which backend ran, and why
+    labels = [entry[1] for entry in _draw_all(bpy) if entry[0] == "label"]
+    assert any(t.startswith("Using: numpy") for t in labels)
+
+
+def test_track_with_gpu_asked_for_and_no_gpu_names_the_fix(fake_track, monkeypatch, addon_module_name):
+    bpy = fake_track[0]
+    choice = _module(addon_module_name, "operators.backend_choice")
+    monkeypatch.setattr(choice, "_probe_result", {"ok": False, "error": "libEGL.so.1: cannot open"})
+    m = bpy.context.scene.mocap
+    m.backend = "gpu"
+    with pytest.raises(RuntimeError, match="apt-get install"):
+        bpy.ops.mocap.track()
+    assert FakeSession.last is None and not m.is_tracking
+    assert "libEGL" in m.last_error and "apt-get install" in m.last_error and "\n" not in m.last_error
+    m.backend = "auto"  # auto falls back instead, and says why
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert FakeSession.last.args["settings"].backend in ("fast", "numpy") and "no usable GPU" in m.backend_used
 
 
 def test_status_is_one_line_per_frame_and_the_preparation_its_own_step(fake_track):

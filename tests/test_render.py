@@ -298,7 +298,7 @@ def test_frame_targets_reject_mismatched_shapes():
 
 def test_unknown_backend_is_rejected_with_the_choices():
     with pytest.raises(ValueError, match="numpy"):
-        render.resolve_backend("gpu")
+        render.resolve_backend("cuda")
 
 
 _PROBE = """
