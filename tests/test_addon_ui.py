@@ -19,7 +19,7 @@ from rig_helpers import build_armature
 pytestmark = pytest.mark.bpy
 
 PANELS = ("MOCAP_PT_capture", "MOCAP_PT_subject", "MOCAP_PT_track", "MOCAP_PT_results")
-OPERATOR_MODULES = ("import_capture", "setup_subject", "track", "export")
+OPERATOR_MODULES = ("import_capture", "setup_subject", "calibrate", "track", "export")
 
 
 def _module(addon_module_name, name):
