@@ -69,7 +69,7 @@ class MocapSettings(bpy.types.PropertyGroup):
     subject_dofs: IntProperty(name="DOF", default=0, description="Degrees of freedom the tracker will solve")
     subject_preset: StringProperty(name="Preset", description="Rig naming the bones were matched with")
     subject_problems: StringProperty(name="Problems", description="What stops the rig from being tracked")
-    calibrate_frames: IntProperty(name="Calibration Frames", default=10, min=3, soft_max=60,
+    calibrate_frames: IntProperty(name="Calibration Frames", default=20, min=3, soft_max=60,
                                   description="Fit the actor's proportions on this many frames from the start of "
                                               "the tracked range")
     actor_file: StringProperty(name="Actor Calibration", subtype="FILE_PATH",

@@ -87,7 +87,7 @@ class _JointProblem:
     """Factors and every frame's pose at once: residuals and a sparse finite-difference Jacobian whose
     pose columns are evaluated for all frames in one batched forward-kinematics call per DOF."""
 
-    def __init__(self, light, keys, points, oks, poses0, hold=0.02, pull=PULL_TO_OVERALL):
+    def __init__(self, light, keys, points, oks, poses0, hold=0.02, pull=None):
         self.light, self.keys, self.points, self.oks = light, keys, points, oks
         self.poses0 = poses0
         self.F, self.D = poses0.shape
@@ -95,6 +95,7 @@ class _JointProblem:
         held = np.concatenate([light.translation_dofs, light.root_rotation_dofs])
         self.pulled = np.setdiff1d(np.arange(self.D), held)
         self.hold = hold
+        pull = PULL_TO_OVERALL if pull is None else pull
         self.pull = np.array([PULL_NECK if k.endswith("neck") else pull for k in keys])
         self.frame_of_row = np.concatenate([np.repeat(np.nonzero(ok)[0] * 0 + f, 3) for f, ok in enumerate(oks)]
                                            + [np.repeat(np.arange(self.F), len(self.pulled))])

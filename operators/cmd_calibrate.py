@@ -11,7 +11,7 @@ def add_arguments(p):
     p.add_argument("--capture", type=Path, required=True, help="capture folder")
     p.add_argument("--out", type=Path, required=True,
                    help="folder for actor.json (and calibration_frames/, the frames it tracked)")
-    p.add_argument("--frames", help="capture frames A-B to calibrate on (default: the first 10)")
+    p.add_argument("--frames", help="capture frames A-B to calibrate on (default: the first 20)")
     p.add_argument("--armature", help="armature to use if the scene has several")
     add_tracking_options(p)
 

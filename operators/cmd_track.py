@@ -65,7 +65,7 @@ def add_arguments(p):
                        help="fit the actor's proportions on the first frames first (saved as OUT/actor.json), then "
                             "track with them and key the character with the actor's rotations")
     actor.add_argument("--actor", type=Path, help="reuse a saved actor calibration (actor.json of an earlier take)")
-    p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 10 tracked)")
+    p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 20 tracked)")
     add_tracking_options(p)
 
 
@@ -140,7 +140,9 @@ def load_actor_option(args, scene, armature):
 
     frames = parse_frames(args.calibrate_frames)
     if frames is None and args.frames:
-        frames = parse_frames(args.frames)[:10]
+        from .actor_calibration import DEFAULT_FRAMES
+
+        frames = parse_frames(args.frames)[:DEFAULT_FRAMES]
     fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args), frames=frames,
                                 log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
     for line in describe(fit):
