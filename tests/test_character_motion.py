@@ -23,7 +23,7 @@ def _tool():
                          ids=["subject scaled to 1.2 m", "other proportions"])
 def test_character_keeps_its_bones_and_its_feet_on_the_floor(addon_module_name, bpy_module, tmp_path, factors,
                                                               overall):
-    """Walk's true motion (30 frames) keyed onto a smaller character: the BVH re-imports with the character's
+    """Walk's true motion (30 frames) keyed onto a smaller character: the BVH re-imports (BVH and FBX) with the character's
     own bone offsets (not the subject's), and its lowest skin point stays within 2.5 cm of the floor
     (median 1.2-1.3 cm: the shoe sole's rounding) whenever the actor's does within 3 cm."""
     from scene_helpers import ground_truth_poses
@@ -38,6 +38,8 @@ def test_character_keeps_its_bones_and_its_feet_on_the_floor(addon_module_name, 
     assert report["bvh_bone_length_max_error_m"] < 1e-5
     assert report["character_vs_subject_bone_length_max_difference_m"] > 0.05  # its own bones, not the subject's
     assert report["bvh_toe_height_vs_keyed_max_m"] < 1e-5
+    assert report["fbx_bones"] >= 30 and report["fbx_bone_length_max_error_m"] < 1e-5
+    assert report["fbx_toe_height_vs_keyed_max_m"] < 1e-5
     low = report["character_lowest_skin_above_floor_m"]
     assert -0.025 < low["min"] and low["max"] < 0.025 and abs(low["median"]) < 0.02
     if not factors:  # a uniformly scaled character: the feet are the actor's, scaled (exactly)

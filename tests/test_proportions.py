@@ -77,20 +77,20 @@ def _synthetic_landmarks(actor, cameras, poses, rng, noise_px):
 
 def test_fit_recovers_known_proportions_from_landmarks(walk):
     """Landmarks projected from a scaled body (1.5 px noise) into the walk cameras, the subject's true poses
-    as starting points: every fitted segment within 2 % of the truth, and the residual drops."""
+    as starting points: every fitted segment within 3 % of the truth, and the residual drops."""
     body, poses = walk
     actor = scaled_body(body, ACTOR)
     cameras = read_calibration(scene_dir("walk"))
-    frames = np.arange(0, 60, 6)
+    frames = np.arange(0, 60, 10)
     uv, vis = _synthetic_landmarks(actor, cameras, poses[frames], np.random.default_rng(0), 1.5)
-    fit = fit_proportions(body, cameras, uv, vis, poses[frames], frames=frames, rounds=3)
+    fit = fit_proportions(body, cameras, uv, vis, poses[frames], frames=frames)
     truth = segment_lengths(actor)
-    for seg in ("spine", "shoulder_width", "upper_arm", "forearm", "hip_width", "thigh", "shin"):
-        assert fit.lengths[seg] == pytest.approx(truth[seg], rel=0.02), seg
+    for seg in ("spine", "shoulder_width", "upper_arm", "forearm", "hip_width", "thigh", "shin", "height"):
+        assert fit.lengths[seg] == pytest.approx(truth[seg], rel=0.03), seg
     assert fit.rms_after < 0.5 * fit.rms_before
     # and the same fit on the unscaled subject's own landmarks stays at 1 (no drift)
     uv, vis = _synthetic_landmarks(body, cameras, poses[frames], np.random.default_rng(1), 1.5)
-    fit = fit_proportions(body, cameras, uv, vis, poses[frames], frames=frames, rounds=2)
+    fit = fit_proportions(body, cameras, uv, vis, poses[frames], frames=frames)
     for seg in ("upper_arm", "forearm", "thigh", "shin"):
         assert fit.proportions.factor(seg) == pytest.approx(1.0, abs=0.02), seg
 

@@ -31,17 +31,22 @@ def _lowest_skin_z(bpy, mesh_obj, frames):
     return np.array(out)
 
 
-def _bone_lengths(arm):
-    """Each bone's rest offset from its parent's head: what a BVH stores (its tails are not in the file)."""
-    return {b.name: float((b.head_local - b.parent.head_local).length) for b in arm.data.bones if b.parent}
+def _bone_lengths(arm, world=False):
+    """Each bone's rest offset from its parent's head (what a BVH stores: its tails are not in the file), in
+    armature space or (world=True, for FBX, which carries the object's transform and unit scale) in world space."""
+    M = np.array(arm.matrix_world) if world else np.eye(4)
+    head = lambda b: M[:3, :3] @ np.array(b.head_local) + M[:3, 3]
+    return {b.name: float(np.linalg.norm(head(b) - head(b.parent))) for b in arm.data.bones if b.parent}
 
 
-def _toe_heights(bpy, arm, frames, names=("LeftToeBase", "RightToeBase")):
-    """Lowest toe-joint height per frame, armature space (BVH keeps no object transform)."""
+def _toe_heights(bpy, arm, frames, names=("LeftToeBase", "RightToeBase"), world=False):
+    """Lowest toe-joint height per frame, armature space (BVH keeps no object transform) or world."""
     out = []
     for f in frames:
         bpy.context.scene.frame_set(f)
-        out.append(min(float(arm.pose.bones[n].head[2]) for n in names if n in arm.pose.bones))
+        M = np.array(arm.matrix_world) if world else np.eye(4)
+        out.append(min(float((M[:3, :3] @ np.array(arm.pose.bones[n].head) + M[:3, 3])[2])
+                       for n in names if n in arm.pose.bones))
     return np.array(out)
 
 
@@ -77,7 +82,17 @@ def check_character(bpy, package, subject_blend, poses, proportions, out_dir, ac
     actor_low = actor.deform(np.asarray(poses))[..., 2].min(axis=1)
     floor_a, hip_a = prop.standing_heights(actor)
     floor_c, hip_c = prop.standing_heights(character)
+    world_lengths = _bone_lengths(char_arm, world=True)
+    world_toes = _toe_heights(bpy, char_arm, frames, world=True)
     bvh = export.export_bvh(bpy.context, char_arm, out_dir / "character.bvh", (frames[0], frames[-1]), scene=scene)
+    fbx = export.export_fbx(bpy.context, char_arm, out_dir / "character.fbx", (frames[0], frames[-1]), scene=scene)
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=str(fbx), anim_offset=0.0, automatic_bone_orientation=False)
+    fbx_arm = next(o for o in bpy.context.scene.objects if o.type == "ARMATURE")
+    fbx_back = _bone_lengths(fbx_arm, world=True)
+    fbx_err = max(abs(fbx_back[n] - world_lengths[n]) for n in sorted(set(fbx_back) & set(world_lengths)))
+    fbx_toes = _toe_heights(bpy, fbx_arm, frames, world=True)
 
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.import_anim.bvh(filepath=str(bvh), frame_start=frames[0], axis_forward="Y", axis_up="Z",
@@ -95,6 +110,8 @@ def check_character(bpy, package, subject_blend, poses, proportions, out_dir, ac
         "character_vs_subject_bone_length_max_difference_m": float(max(abs(lengths[n] - subject_lengths[n])
                                                                        for n in common)),
         "bvh_toe_height_vs_keyed_max_m": float(np.abs(toes_back - char_toes).max()),
+        "fbx_bones": len(fbx_back), "fbx_bone_length_max_error_m": float(fbx_err),
+        "fbx_toe_height_vs_keyed_max_m": float(np.abs(fbx_toes - world_toes).max()),
         "character_lowest_skin_above_floor_m": {
             "median": float(np.median(char_low - floor_c)), "p5": float(np.percentile(char_low - floor_c, 5)),
             "p95": float(np.percentile(char_low - floor_c, 95)), "min": float((char_low - floor_c).min()),
