@@ -77,6 +77,7 @@ class TrackSession:
             "cameras": [c.name for c in self.capture.cameras], "preset": self.body.preset,
             "dof_names": self.body.dof_names}, blender_version=_blender_version())
         if actor is not None:
+            self._keep_actor_file(actor)
             self.writer.info["actor"] = {"height_m": actor.get("height_m"), "lengths_m": actor.get("lengths_m"),
                                          "note": "joints.npz and poses.npz are the actor's; the animation files "
                                                  "are the character's (rotations as solved, root path rescaled)"}
@@ -90,6 +91,20 @@ class TrackSession:
                 self.frames = [f for f in self.all_frames if f not in solved]
                 self.log(f"resuming after frame {done[-1].frame}: {len(done)} frames already solved")
         self._cancel = threading.Event()
+
+    def _keep_actor_file(self, actor):
+        """The result folder keeps the calibration it was tracked with (evaluate and later takes read it)."""
+        import json
+
+        path = self.writer.out / "actor.json"
+        if path.is_file():
+            try:
+                if json.loads(path.read_text()) == actor:
+                    return
+            except (OSError, ValueError):
+                pass
+        with atomic_path(path) as tmp:
+            Path(tmp).write_text(json.dumps(actor, indent=1))
 
     def prepare(self):
         """Build the prior, dynamics and tracker (engine only; safe off the main thread)."""
