@@ -14,7 +14,7 @@ def calibration_frames(all_frames, count=DEFAULT_FRAMES):
 
 
 def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames=None, log=None, step=None,
-                    progress=None):
+                    progress=None, symmetric=True):
     """Track `frames` (default: the first DEFAULT_FRAMES) with the rig into OUT/calibration_frames/, fit the
     proportions, write OUT/actor.json. Returns (ProportionsFit, path of actor.json)."""
     from ..core.actor_file import save_actor
@@ -36,7 +36,7 @@ def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames
                              "(the default lsilh+edge+kp)")
         fit = fit_proportions(session.character, session.capture.cameras, np.array([e.landmarks for e in est]),
                               np.array([e.landmark_visibility for e in est]), np.array([e.pose for e in est]),
-                              frames=[e.frame for e in est])
+                              frames=[e.frame for e in est], symmetric=symmetric)
     finally:
         session.capture.close()
     path = save_actor(out_dir / "actor.json", fit, subject_name=armature.name, capture=Path(capture_dir).resolve())
@@ -47,9 +47,11 @@ def describe(fit):
     """The fitted height and segment lengths, one line each (for the terminal and the panel)."""
     L, S = fit.lengths, fit.subject_lengths
     lines = [f"height {L['height']:.3f} m (rig {S['height']:.3f} m)"]
+    sided = any(k[:2] in ("l_", "r_") for k in fit.proportions.factors)
     for seg in ("spine", "neck", "shoulder_width", "hip_width", "upper_arm", "forearm", "thigh", "shin", "foot"):
-        lines.append(f"{seg.replace('_', ' ')} {L[seg] * 100:.1f} cm (rig {S[seg] * 100:.1f} cm, "
-                     f"x{L[seg] / S[seg]:.3f})")
+        for key in ([f"l_{seg}", f"r_{seg}"] if sided and f"l_{seg}" in L else [seg]):
+            lines.append(f"{key.replace('_', ' ')} {L[key] * 100:.1f} cm (rig {S[key] * 100:.1f} cm, "
+                         f"x{L[key] / S[key]:.3f})")
     lines.append(f"landmark residual {fit.rms_before * 1000:.1f} mm with the rig -> {fit.rms_after * 1000:.1f} mm "
                  f"calibrated, {len(fit.frames)} frames")
     return lines

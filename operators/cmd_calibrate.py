@@ -13,6 +13,8 @@ def add_arguments(p):
                    help="folder for actor.json (and calibration_frames/, the frames it tracked)")
     p.add_argument("--frames", help="capture frames A-B to calibrate on (default: the first 20)")
     p.add_argument("--armature", help="armature to use if the scene has several")
+    p.add_argument("--asymmetric", action="store_true",
+                   help="fit the left and right limbs separately (default: one length per segment for both sides)")
     add_tracking_options(p)
 
 
@@ -27,7 +29,7 @@ def run(args):
         armature = find_armature(scene, args.armature)
         fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args),
                                     frames=parse_frames(args.frames), log=lambda m: print(m, file=sys.stderr),
-                                    step=StepPrinter())
+                                    step=StepPrinter(), symmetric=not args.asymmetric)
     except (SubjectError, ProportionsFitError, ValueError, FileNotFoundError, ResultWriteError) as exc:
         print(f"markerless_mocap calibrate: {exc}", file=sys.stderr)
         return 2
