@@ -19,7 +19,6 @@ def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames
     proportions, write OUT/actor.json. Returns (ProportionsFit, path of actor.json)."""
     from ..core.actor_file import save_actor
     from ..core.proportions_fit import fit_proportions
-    from .cmd_track import run_session
     from .track_session import TrackSession
 
     log = log or (lambda msg: None)
@@ -29,7 +28,9 @@ def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames
     if frames is None:  # the first frames of the take
         session.all_frames = session.frames = calibration_frames(session.all_frames)
     try:
-        run_session(session, progress=progress or (lambda est: log(f"calibration: frame {est.frame} solved")))
+        progress = progress or (lambda est: log(f"calibration: frame {est.frame} solved"))
+        while (est := session.solve_next()) is not None:  # not keyed: the rig keeps the user's animation
+            progress(est)
         est = session.writer.estimates
         if not est or est[0].landmarks is None:
             raise ValueError("calibration needs the learned landmarks: track with a likelihood that has 'kp' "
