@@ -121,3 +121,33 @@ def test_cli_reuses_a_saved_calibration_and_refuses_a_bad_one(subject_with_actor
     assert run.returncode == 2
     last = run.stderr.strip().splitlines()[-1]
     assert last.startswith("markerless_mocap track: ") and "not an actor calibration" in last
+
+
+def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
+    """`track --calibrate` end to end (a tiny search budget, 3 calibration frames, 2 tracked): OUT/actor.json is
+    written, joints.npz holds the calibrated actor's bones (its forearm length), and the BVH the rig's own
+    bones (the character is keyed, not stretched)."""
+    import json
+
+    from markerless_mocap.core.actor_file import load_actor
+
+    scene = subject_blend_path().parents[1] / "actor"
+    out = tmp_path / "r"
+    run = subprocess.run([sys.executable, "-m", "markerless_mocap", "track", "--scene", str(scene / "subject.blend"),
+                          "--capture", str(scene), "--out", str(out), "--calibrate", "--calibrate-frames", "0-2",
+                          "--frames", "0-1", "--particles", "10", "--iterations", "2", "--refine", "none",
+                          "--no-overlays"], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "actor: height" in run.stderr
+    actor = load_actor(out / "actor.json")
+    assert actor["frames"] == [0, 1, 2] and 1.3 < actor["height_m"] < 1.8
+    assert json.loads((out / "report.json").read_text())["actor"]["lengths_m"] == actor["lengths_m"]
+    with np.load(out / "joints.npz") as z:
+        names, P = [str(n) for n in z["names"]], z["positions"]
+    fore = np.linalg.norm(P[:, names.index("LeftHand")] - P[:, names.index("LeftForeArm")], axis=1)
+    np.testing.assert_allclose(fore, actor["lengths_m"]["l_forearm"], rtol=1e-6)
+    rig_fore = actor["subject_lengths_m"]["l_forearm"]
+    text = (out / "animation.bvh").read_text().split("JOINT LeftHand", 1)[1]
+    offset = np.array([float(v) for v in text.split("OFFSET", 1)[1].split("\n", 1)[0].split()])
+    assert np.linalg.norm(offset) == pytest.approx(rig_fore, rel=1e-4)  # the character's forearm in the BVH
+    assert abs(rig_fore - actor["lengths_m"]["l_forearm"]) > 1e-3
