@@ -50,6 +50,10 @@ KEYPOINT_SIGMA = 0.05
 # person's size was 0.024 at visibility >= 0.8, 0.042 at 0.1-0.3 and 0.059 below 0.1 (p90 0.11): an occluded
 # wrist is still placed within a few centimetres most of the time, so it counts, with less weight.
 VISIBILITY_FLOOR = 0.25
+# A heatmap's second guess (core/features/learned.py, heatmap_alternatives) costs what the regressed point
+# would plus this much per logit it lies below the landmark's top peak: a close runner-up is nearly as good
+# an explanation; one ALTERNATIVE_MAX_GAP (3) logits down costs 0.75 more, close to an outlier's 1.
+ALTERNATIVE_COST_PER_LOGIT = 0.25
 
 
 class KeypointMapError(ValueError):
@@ -147,23 +151,72 @@ def landmark_offsets(body, landmarks):
 
 @dataclass
 class KeypointTargets:
-    """One frame's landmarks for the rig points: (C,K,2) capture pixels, (C,K) weights, (C,) person size."""
+    """One frame's landmarks for the rig points: (C,K,2) capture pixels, (C,K) weights, (C,) person size;
+    optionally each landmark's second guesses from the heatmaps, (C,K,A,2) pixels and (C,K,A) extra cost
+    (inf where there is none)."""
     uv: np.ndarray
     weight: np.ndarray
     person_px: np.ndarray
+    alt_uv: np.ndarray | None = None
+    alt_cost: np.ndarray | None = None
 
     def scaled(self, factor):
         """The same landmarks for cameras scaled by `factor` (Camera.scaled)."""
-        return KeypointTargets((self.uv + 0.5) * factor - 0.5, self.weight, self.person_px * factor)
+        alt = None if self.alt_uv is None else (self.alt_uv + 0.5) * factor - 0.5
+        return KeypointTargets((self.uv + 0.5) * factor - 0.5, self.weight, self.person_px * factor, alt,
+                               self.alt_cost)
+
+    def candidates(self):
+        """(C,K,1+A,2) positions and (C,K,1+A) extra costs: the regressed landmark first, then its second
+        guesses."""
+        uv, cost = self.uv[:, :, None], np.zeros(self.uv.shape[:2] + (1,))
+        if self.alt_uv is None:
+            return uv, cost
+        return np.concatenate([uv, self.alt_uv], axis=2), np.concatenate([cost, self.alt_cost], axis=2)
 
     @classmethod
-    def from_evidence(cls, evidence, rig_points, margin):
+    def from_evidence(cls, evidence, rig_points, margin, alternatives=True):
         uv = np.stack([ev.keypoints[rig_points.landmarks] for ev in evidence])
         weight = np.stack([VISIBILITY_FLOOR + (1 - VISIBILITY_FLOOR) * ev.visibility[rig_points.landmarks]
                            if ev.found else np.zeros(len(rig_points.landmarks)) for ev in evidence])
         size = np.array([ev.box.size / margin if ev.box is not None else 1.0 for ev in evidence])
         uv = np.where(np.isfinite(uv), uv, 0.0)
-        return cls(uv, weight, size)
+        alt_uv = alt_cost = None
+        if alternatives and any(ev.alternatives is not None for ev in evidence):
+            n_alt = max(ev.alternatives.shape[1] for ev in evidence if ev.alternatives is not None)
+            alt = np.full((len(evidence), len(rig_points.landmarks), n_alt, 3), np.nan)
+            for c, ev in enumerate(evidence):
+                if ev.found and ev.alternatives is not None:
+                    alt[c, :, :ev.alternatives.shape[1]] = ev.alternatives[rig_points.landmarks]
+            missing = ~np.all(np.isfinite(alt), axis=-1)
+            alt_uv = np.where(missing[..., None], 0.0, alt[..., :2])
+            alt_cost = np.where(missing, np.inf, ALTERNATIVE_COST_PER_LOGIT * alt[..., 2])
+        return cls(uv, weight, size, alt_uv, alt_cost)
+
+
+def _candidate_costs(projected, targets, order, sigma):
+    """(P,C,K) rho of each projected rig point against landmark order[k] (weights included): the cheapest
+    of that landmark's candidates, and which candidate it was."""
+    uv, extra = targets.candidates()
+    uv, extra, w = uv[:, order], extra[:, order], targets.weight[:, order]
+    d2 = np.sum((projected[:, :, :, None] - uv[None]) ** 2, axis=-1)          # (P,C,K,1+A)
+    r2 = (1.0 / (sigma * targets.person_px[None, :, None, None])) ** 2
+    rho = np.minimum(d2 * r2 / (d2 * r2 + 1) + extra[None], 1.0)
+    best = np.argmin(rho, axis=-1)
+    return w[None] * np.take_along_axis(rho, best[..., None], axis=-1)[..., 0], best
+
+
+def assigned_costs(projected, targets, swap, sigma=KEYPOINT_SIGMA):
+    """Per point (P,C,K): its weighted rho, whether its view's left/right pair is taken the other way round,
+    and which candidate of the landmark it matched (0: the regressed point). Each pair is assigned the way
+    that costs less (single-view detectors swap sides), each landmark's cheapest candidate counted."""
+    K = projected.shape[2]
+    rho_same, best_same = _candidate_costs(projected, targets, np.arange(K), sigma)
+    rho_swap, best_swap = _candidate_costs(projected, targets, swap, sigma)
+    pair_same = rho_same + rho_same[:, :, swap]  # a pair's cost under each assignment
+    pair_swap = rho_swap + rho_swap[:, :, swap]
+    flip = pair_swap < pair_same
+    return np.where(flip, rho_swap, rho_same), flip, np.where(flip, best_swap, best_same)
 
 
 def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA):
@@ -171,18 +224,12 @@ def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA):
 
     Per view: the weighted mean of rho over the points; each left/right pair counts with whichever
     assignment fits the pose better (single-view detectors swap sides; the other views and the other cues
-    decide). Views without landmarks are left out; the mean is over the views that have some.
+    decide), and each landmark with whichever of its candidates (the regressed point, the heatmap's second
+    guesses at their extra cost) fits better. Views without landmarks are left out; the mean is over the
+    views that have some.
     """
-    d_same = np.linalg.norm(projected - targets.uv[None], axis=-1)            # (P,C,K)
-    d_swap = np.linalg.norm(projected - targets.uv[None][:, :, swap], axis=-1)
+    per_point, _, _ = assigned_costs(projected, targets, swap, sigma)
     w = targets.weight
-    w_swap = w[:, swap]
-    r2 = (1.0 / (sigma * targets.person_px[None, :, None])) ** 2
-    rho_same = w[None] * (d_same ** 2 * r2) / (d_same ** 2 * r2 + 1)
-    rho_swap = w_swap[None] * (d_swap ** 2 * r2) / (d_swap ** 2 * r2 + 1)
-    pair_same = rho_same + rho_same[:, :, swap]  # a pair's cost under each assignment
-    pair_swap = rho_swap + rho_swap[:, :, swap]
-    per_point = np.where(pair_swap < pair_same, rho_swap, rho_same)
     total_w = w.sum(axis=1)  # swapping permutes the weights within pairs: same total
     seen = total_w > 1e-6
     if not seen.any():
@@ -195,25 +242,29 @@ def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA):
 LIMB_LANDMARKS = {"left arm": (13, 15), "right arm": (14, 16), "left leg": (25, 27), "right leg": (26, 28)}
 
 
+def chosen_targets(projected, targets, swap, sigma=KEYPOINT_SIGMA):
+    """What each rig point of one pose is compared with, as in the energy: projected (C,K,2) -> the chosen
+    landmark position (C,K,2) (its pair's assignment, its cheapest candidate) and that landmark's weight."""
+    _, flip, best = assigned_costs(projected[None], targets, swap, sigma)
+    flip, best = flip[0], best[0]
+    K = projected.shape[1]
+    landmark = np.where(flip, swap[None, :], np.arange(K)[None, :])               # (C,K)
+    uv, _ = targets.candidates()
+    chosen = uv[np.arange(len(uv))[:, None], landmark, best]                       # (C,K,2)
+    return chosen, np.take_along_axis(targets.weight, landmark, axis=1)
+
+
 def limb_disagreement(projected, targets, rig_points, min_weight=0.2):
     """How far each limb of one pose lies from its landmarks: projected (C,K,2) -> {limb: median distance
     in units of the person's size over the views and points that see it (NaN where none does)}.
 
-    Each view's left/right assignment is the one that fits the pose better, as in the energy."""
-    d_same = np.linalg.norm(projected - targets.uv, axis=-1) / targets.person_px[:, None]    # (C,K)
-    d_swap = np.linalg.norm(projected - targets.uv[:, rig_points.swap], axis=-1) / targets.person_px[:, None]
-    w = targets.weight
-    w_swap = w[:, rig_points.swap]
+    Each point is compared with what the energy compares it with (chosen_targets)."""
+    chosen, w = chosen_targets(projected, targets, rig_points.swap)
+    d = np.linalg.norm(projected - chosen, axis=-1) / targets.person_px[:, None]    # (C,K)
     index = {int(lm): i for i, lm in enumerate(rig_points.landmarks)}
     out = {}
     for limb, landmarks in LIMB_LANDMARKS.items():
         idx = [index[lm] for lm in landmarks if lm in index]
-        both = idx + [int(rig_points.swap[i]) for i in idx]
-        values = []
-        for c in range(len(w)):
-            same = d_same[c, both].sum()
-            swapped = d_swap[c, both].sum()
-            d, wc = (d_swap[c, idx], w_swap[c, idx]) if swapped < same else (d_same[c, idx], w[c, idx])
-            values += list(d[wc >= min_weight])
-        out[limb] = float(np.median(values)) if values else float("nan")
+        values = d[:, idx][w[:, idx] >= min_weight]
+        out[limb] = float(np.median(values)) if values.size else float("nan")
     return out

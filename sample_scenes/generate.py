@@ -70,6 +70,25 @@ SCENES = {
                            (29, 6, 10, 5, {"Left": "cross", "Right": "cross_front"}),
                            (53, 5, 6, 4, {"Left": "face", "Right": "belly"}),
                            (70, 3, 2, 4, {"Right": "cross"})]),
+    # held out (issue 13): nobody tunes on it; it judges whether a change tuned on the others generalises.
+    # 01_01 turning round then a forward jump (source frames 272-331, playground's are 580-669), its own
+    # gestures, a fourth camera layout, clothes and a second person of its own; busy's room and dimmer.
+    "dusk": dict(bvh="01_01.bvh", start=272, n_frames=60, seed=2613, uncontrolled=True, calibration="easymocap",
+                 busy=True, noise=6.0, blur=0.7,
+                 cameras=[
+                     (-84, 3.5, 1.25, 495, (-3.0, 5.5), -0.9),
+                     (-37, 3.9, 1.95, 575, (6.0, 2.5), 1.4),
+                     (9, 3.4, 1.60, 490, (-5.5, -6.5), 0.3),
+                     (52, 3.8, 1.35, 550, (3.5, -1.5), -1.3)],
+                 # another stretch of 01_01: jumps forward, the other way, 1.7 m behind the subject's path
+                 second=dict(bvh="01_01.bvh", start=380, offset_m=1.7,
+                             colours={"shirt": (0.04, 0.1, 0.05), "trousers": (0.3, 0.26, 0.18),
+                                      "hair": (0.2, 0.17, 0.12)}),
+                 colours={"shirt": (0.09, 0.11, 0.11), "trousers": (0.06, 0.05, 0.045)},
+                 gestures=[(2, 8, 6, 6, {"Right": "overhead"}),
+                           (23, 5, 6, 5, {"Left": "face", "Right": "face"}),
+                           (39, 4, 5, 4, {"Left": "shoulder"}),
+                           (50, 4, 3, 3, {"Right": "shoulder"})]),
     # issue 15: the walk performed by an actor whose proportions differ from the subject the tracker is given
     # (8 % shorter overall, forearms 10 % longer than that); the tracker gets walk's subject.blend unchanged,
     # and the clip is placed so the actor starts where walk's subject was placed for.
@@ -222,9 +241,10 @@ def gesture_weights(gestures, F):
 
 
 def add_arm_gestures(res, names, parents, rest, gestures):
-    """Key hand-to-face and arms-crossed motion on top of the retargeted clip: per frame, each arm's
-    wrist is moved (along a path bulging forward, so it does not go through the body) towards a target
-    in the body's frame, and the shoulder and elbow are turned by two-bone IK. Changes res in place."""
+    """Key hand-to-face, arms-crossed, overhead and hand-to-shoulder motion on top of the retargeted clip:
+    per frame, each arm's wrist is moved (along a path bulging forward, so it does not go through the body)
+    towards a target in the body's frame, and the shoulder and elbow are turned by two-bone IK. Changes res
+    in place."""
     F = res.basis_rotations.shape[0]
     idx = {n: k for k, n in enumerate(names)}
     basis = res.basis_rotations.copy()
@@ -250,6 +270,12 @@ def add_arm_gestures(res, names, parents, rest, gestures):
                 elif kind == "cross_front":
                     T = chest - 0.05 * up - 0.14 * side_dir + 0.25 * fwd
                     pole = side_dir - 0.4 * up
+                elif kind == "overhead":
+                    T = head + 0.55 * up + 0.05 * fwd + 0.12 * side_dir
+                    pole = side_dir - 0.3 * fwd
+                elif kind == "shoulder":   # the hand on the opposite shoulder
+                    T = P[idx[f"{other}Arm"]] + 0.02 * up + 0.08 * fwd
+                    pole = side_dir - 0.7 * up + 0.3 * fwd
                 else:   # "belly": the hand across the front of the belly, to the other side
                     T = hips + 0.3 * (neck - hips) - 0.1 * side_dir + 0.2 * fwd
                     pole = side_dir - 0.8 * up

@@ -341,3 +341,59 @@ def test_triangulation_baseline_of_exact_landmarks_is_exact(walk_truth, tmp_path
     got_frames, errors, joints = triangulation_errors(tmp_path / "keypoints.npz", cameras, truth)
     assert list(got_frames) == list(use) and joints == list(TRIANGULATION_JOINTS)
     assert np.nanmax(errors) < 1e-6
+
+
+# ------------------------------------------------------------------------------------------ heatmap second guesses
+def _blob(cx, cy, peak, size=64, width=1.5):
+    """A heatmap of logits with one Gaussian bump at cell coordinates (cx, cy) (cell centres at i + 0.5)."""
+    y, x = np.mgrid[0:size, 0:size] + 0.5
+    return peak - 20.0 * (1 - np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * width ** 2)))
+
+
+def test_heatmap_alternatives_find_the_runner_up_peak():
+    from markerless_mocap.core.features.learned import heatmap_alternatives
+
+    heat = np.full((3, 64, 64), -20.0, np.float32)
+    heat[0] = np.maximum(_blob(20.5, 30.5, 1.0), _blob(44.5, 12.5, 0.2))   # runner-up 0.8 logits down
+    heat[1] = np.maximum(_blob(20.5, 30.5, 1.0), _blob(44.2, 12.8, 0.5))   # runner-up between cells
+    heat[2] = np.maximum(_blob(20.5, 30.5, 1.0), _blob(50.5, 50.5, -4.0))  # runner-up 5 logits down
+    regressed = np.array([[20.5 * 4, 30.5 * 4]] * 3)                        # crop pixels: 4 per cell
+    alt = heatmap_alternatives(heat, regressed)
+    assert alt.shape == (3, 2, 3)
+    np.testing.assert_allclose(alt[0, 0], [44.5 * 4, 12.5 * 4, 0.8], atol=1e-4)
+    np.testing.assert_allclose(alt[1, 0, :2], [44.2 * 4, 12.8 * 4], atol=0.5)  # refined within the cell
+    assert np.isnan(alt[0, 1]).all() and np.isnan(alt[1, 1]).all() and np.isnan(alt[2]).all()
+
+
+def test_a_pose_on_a_second_guess_costs_little_more_than_on_the_landmark(walk_truth):
+    """The left wrist's landmark regressed 60 px off (onto the other side of the body) in one view, with
+    the true place as the heatmap's runner-up 0.4 logits down: the truth costs that view 0.1 more
+    (ALTERNATIVE_COST_PER_LOGIT x 0.4), not an outlier's ~1, and ICP compares the wrist with the second
+    guess where the pose puts it there."""
+    from markerless_mocap.core.features.learned import CROP_MARGIN
+    from markerless_mocap.core.keypoints import (ALTERNATIVE_COST_PER_LOGIT, KeypointTargets, chosen_targets,
+                                                 keypoint_energy)
+
+    body, poses, cameras, rig = walk_truth
+    truth = poses[20]
+    evidence = synthetic_evidence(body, truth, cameras, rig)
+    wrist = list(rig.landmarks).index(15)
+    true_uv = evidence[1].keypoints[15].copy()
+    evidence[1].keypoints[15] = true_uv + [60.0, 0.0]
+    pts = rig.world(body, truth[None])
+    projected = np.stack([c.project(pts.reshape(-1, 3)).reshape(1, -1, 2) for c in cameras], axis=1)
+    without = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN)
+    for ev in evidence:
+        ev.alternatives = np.full((33, 2, 3), np.nan)
+    evidence[1].alternatives[15, 0] = [*true_uv, 0.4]
+    with_alt = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN)
+    w = with_alt.weight[1]
+    e_without = keypoint_energy(projected, without, rig.swap)[0]
+    e_with = keypoint_energy(projected, with_alt, rig.swap)[0]
+    view_share = w[wrist] / w.sum() / len(cameras)  # the wrist's share of the 4-view mean
+    assert e_with == pytest.approx(view_share * ALTERNATIVE_COST_PER_LOGIT * 0.4, rel=1e-6)
+    assert e_without > view_share * 0.9  # the off landmark: nearly an outlier's full cost
+    chosen, _ = chosen_targets(projected[0], with_alt, rig.swap)
+    np.testing.assert_allclose(chosen[1, wrist], true_uv)
+    chosen, _ = chosen_targets(projected[0], without, rig.swap)
+    np.testing.assert_allclose(chosen[1, wrist], true_uv + [60.0, 0.0])

@@ -25,6 +25,17 @@ N_LANDMARKS = 33
 CROP_MARGIN = 1.35       # the crop's side over the larger side of the projected joints' box [measured, doc]
 MIN_PRESENCE = 0.5       # below this the crop is taken to have lost the person
 MASK_THRESHOLD = 0.5     # segmentation probability that counts as person
+# Second guesses from the model's heatmaps (Identity_3: 39 maps of 64 x 64 logits over the crop). Where
+# a landmark is ambiguous (a wrist hidden behind the body, arms crossed) the regressed point is one guess
+# and the heatmap often keeps the other as a second peak: measured on the busy scene, frame 38 (arms
+# crossed), the true left wrist was a peak 0.2 logits below the top one in cam2 and 1.1 below in cam1,
+# while the regressed points sat on the other wrist. Peaks this far below the landmark's top logit, and
+# this far (in crop pixels) from the regressed point, are kept as alternatives; the tracker, not the
+# detector, then decides which one the multi-view pose explains (core/keypoints.py).
+HEATMAP_SIZE = 64
+ALTERNATIVES = 2         # second guesses kept per landmark
+ALTERNATIVE_MAX_GAP = 3.0  # logits below the landmark's top peak
+ALTERNATIVE_MIN_DISTANCE = 24.0  # crop pixels (of 256) from the regressed point
 
 # BlazePose's left/right pairs (odd = the person's left): swapping them mirrors a skeleton.
 LEFT_RIGHT_PAIRS = ((1, 4), (2, 5), (3, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16), (17, 18),
@@ -128,6 +139,9 @@ class ViewEvidence:
     visibility: np.ndarray  # (33,) in [0, 1]: the landmark is in view and not occluded
     presence: float         # the model's confidence that a person is in the crop
     box: CropBox | None     # where it looked; None: no evidence in this view this frame
+    # (33, ALTERNATIVES, 3): second guesses per landmark from the heatmaps, (u, v) image pixels and the
+    # gap in logits below the landmark's top peak; NaN rows where there is none. None: not computed.
+    alternatives: np.ndarray | None = None
 
     @property
     def found(self):
@@ -170,31 +184,74 @@ class LandmarkModel:
             raise LearnedModelError(f"OpenCV could not load the landmark model {path}: {exc.err}; it needs "
                                     "OpenCV 4.9 or later with the TFLite importer") from exc
         self.net.setPreferableBackend(cv2.dnn.DNN_BACKEND_OPENCV)
-        self.outputs = ["Identity", "Identity_1", "Identity_2"]
+        self.outputs = ["Identity", "Identity_1", "Identity_2", "Identity_3"]
 
     def infer(self, crops):
         """crops (N, 256, 256, 3) RGB in [0, 1] -> landmarks (N, 39, 5) raw, presence (N,), mask logits
-        (N, 256, 256)."""
+        (N, 256, 256), heatmap logits (N, 39, 64, 64)."""
         crops = np.asarray(crops, dtype=np.float32)
         if crops.ndim != 4 or crops.shape[1:] != (INPUT_SIZE, INPUT_SIZE, 3):
             raise FeatureInputError(f"crops must be (N, {INPUT_SIZE}, {INPUT_SIZE}, 3); got {crops.shape}")
         self.net.setInput(np.ascontiguousarray(crops.transpose(0, 3, 1, 2)))  # OpenCV wants NCHW
-        landmarks, presence, mask = self.net.forward(self.outputs)
+        landmarks, presence, mask, heat = self.net.forward(self.outputs)
         n = len(crops)
         return (landmarks.reshape(n, -1, 5), presence.reshape(n).astype(np.float64),  # already a probability
-                mask.reshape(n, INPUT_SIZE, INPUT_SIZE))
+                mask.reshape(n, INPUT_SIZE, INPUT_SIZE), heat.reshape(n, -1, HEATMAP_SIZE, HEATMAP_SIZE))
 
     def evidence(self, images, boxes):
         """One ViewEvidence per (image, box), one batched forward pass."""
         crops = np.stack([crop_image(img, box) for img, box in zip(images, boxes)])
-        landmarks, presence, mask_logits = self.infer(crops)
+        landmarks, presence, mask_logits, heat = self.infer(crops)
         out = []
-        for img, box, lm, pres, logit in zip(images, boxes, landmarks, presence, mask_logits):
+        for img, box, lm, pres, logit, hm in zip(images, boxes, landmarks, presence, mask_logits, heat):
             h, w = img.shape[:2]
             kp = box.to_image(lm[:N_LANDMARKS, :2])
             vis = _sigmoid(lm[:N_LANDMARKS, 3]) * _sigmoid(lm[:N_LANDMARKS, 4])
-            out.append(ViewEvidence(mask_to_image(_sigmoid(logit), box, w, h), kp, vis, float(pres), box))
+            alternatives = heatmap_alternatives(hm[:N_LANDMARKS], lm[:N_LANDMARKS, :2])
+            alternatives[..., :2] = box.to_image(alternatives[..., :2])
+            out.append(ViewEvidence(mask_to_image(_sigmoid(logit), box, w, h), kp, vis, float(pres), box,
+                                    alternatives))
         return out
+
+
+def heatmap_alternatives(heat, regressed, n=ALTERNATIVES, max_gap=ALTERNATIVE_MAX_GAP,
+                         min_distance=ALTERNATIVE_MIN_DISTANCE):
+    """Second guesses per landmark: heat (L, 64, 64) logits, regressed (L, 2) crop pixels -> (L, n, 3) of
+    (u, v) crop pixels and the gap below the landmark's top logit, strongest first; NaN where none.
+
+    A second guess is a local maximum of the heatmap (3 x 3 cells) within `max_gap` logits of the top one
+    and at least `min_distance` crop pixels from the regressed point (which stands for the top peak)."""
+    heat = np.asarray(heat, dtype=np.float32)
+    out = np.full((len(heat), n, 3), np.nan)
+    cell = INPUT_SIZE / heat.shape[-1]
+    for lm, h in enumerate(heat):
+        top = float(h.max())
+        peaks = np.argwhere((h == cv2.dilate(h, np.ones((3, 3), np.float32))) & (h >= top - max_gap))
+        if len(peaks) == 0:
+            continue
+        uv = _refined_peaks(h, peaks) * cell  # cell centres (i + 0.5) x cell, in crop pixels
+        far = np.linalg.norm(uv - regressed[lm], axis=1) >= min_distance
+        uv, gap = uv[far], top - h[peaks[far, 0], peaks[far, 1]]
+        order = np.argsort(gap)[:n]
+        out[lm, :len(order), :2] = uv[order]
+        out[lm, :len(order), 2] = gap[order]
+    return out
+
+
+def _refined_peaks(h, peaks):
+    """(N, 2) peak positions (x, y) in cells + 0.5, refined by a parabola through each axis's neighbours."""
+    rows, cols = peaks[:, 0], peaks[:, 1]
+    size = h.shape[0]
+
+    def offset(lo, mid, hi):
+        denom = lo - 2 * mid + hi
+        return np.where(denom < 0, 0.5 * (lo - hi) / np.where(denom < 0, denom, -1.0), 0.0)
+
+    r0, r1 = np.clip(rows - 1, 0, size - 1), np.clip(rows + 1, 0, size - 1)
+    c0, c1 = np.clip(cols - 1, 0, size - 1), np.clip(cols + 1, 0, size - 1)
+    dy = offset(h[r0, cols], h[rows, cols], h[r1, cols])
+    dx = offset(h[rows, c0], h[rows, cols], h[rows, c1])
+    return np.stack([cols + 0.5 + np.clip(dx, -0.5, 0.5), rows + 0.5 + np.clip(dy, -0.5, 0.5)], axis=1)
 
 
 # ---------------------------------------------------------------------------------------- finding the person again

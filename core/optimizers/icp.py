@@ -347,30 +347,23 @@ class IcpSolver:
 
     # ---- keypoints ------------------------------------------------------------------------------
     def _keypoint_assignment(self, x_abs):
-        """(C,K) landmark index each rig point is compared with (each view's left/right pairs as they fit
-        the pose best) and its weight, or None without keypoints."""
+        """(C,K,2) landmark position each rig point is compared with (as the energy compares them: each
+        view's left/right pairs as they fit the pose best, each landmark's best-fitting candidate) and its
+        weight, or None without keypoints."""
+        from ..keypoints import chosen_targets
+
         kp, rig = self.problem.keypoints, self.problem.rig_points
         if kp is None or rig is None or self.settings.keypoint_weight == 0:
             return None
         pts = rig.world(self.problem.body, x_abs[None])[0]
-        K = len(pts)
-        index = np.empty((len(self.problem.cameras), K), dtype=np.int64)
-        for c, cam in enumerate(self.problem.cameras):
-            uv = cam.project(pts)
-            same = np.linalg.norm(uv - kp.uv[c], axis=1)
-            cross = np.linalg.norm(uv - kp.uv[c][rig.swap], axis=1)
-            flip = (cross + cross[rig.swap]) < (same + same[rig.swap])
-            index[c] = np.where(flip, rig.swap, np.arange(K))
-        weight = np.take_along_axis(kp.weight, index, axis=1)
-        return index, weight
+        projected = np.stack([cam.project(pts) for cam in self.problem.cameras])
+        return chosen_targets(projected, kp, rig.swap)
 
     def _keypoint_residuals(self, x_abs, assignment):
         """(C,K,2) projected rig point minus its landmark."""
-        index, _ = assignment
-        kp, rig = self.problem.keypoints, self.problem.rig_points
-        pts = rig.world(self.problem.body, x_abs[None])[0]
-        return np.stack([cam.project(pts) - np.take_along_axis(kp.uv[c], index[c][:, None], axis=0)
-                         for c, cam in enumerate(self.problem.cameras)])
+        target, _ = assignment
+        pts = self.problem.rig_points.world(self.problem.body, x_abs[None])[0]
+        return np.stack([cam.project(pts) for cam in self.problem.cameras]) - target
 
     def _keypoint_cost(self, x_abs, assignment):
         if assignment is None:
