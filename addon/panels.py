@@ -72,6 +72,20 @@ class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
             box.label(text=f"{props.subject_dofs} DOF, preset: {props.subject_preset}", icon="CHECKMARK")
         if props.subject_problems:
             _wrapped(box, props.subject_problems, context, icon="ERROR", alert=not props.subject_dofs)
+        _draw_calibration(layout.box(), props)
+
+
+def _draw_calibration(box, props):
+    """Calibrate step: frames to use, the fitted proportions, a copy of the rig with them."""
+    box.label(text="Actor Calibration", icon="CON_SIZELIKE")
+    box.prop(props, "calibrate_frames")
+    box.operator("mocap.calibrate_actor", icon="MOD_ARMATURE")
+    box.prop(props, "actor_file")
+    for line in props.actor_summary.splitlines():
+        box.label(text=line)
+    if props.actor_file:
+        box.prop(props, "use_actor")
+        box.operator("mocap.apply_actor_copy", icon="DUPLICATE")
 
 
 class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):

@@ -72,6 +72,16 @@ class MocapSettings(bpy.types.PropertyGroup):
     subject_dofs: IntProperty(name="DOF", default=0, description="Degrees of freedom the tracker will solve")
     subject_preset: StringProperty(name="Preset", description="Rig naming the bones were matched with")
     subject_problems: StringProperty(name="Problems", description="What stops the rig from being tracked")
+    calibrate_frames: IntProperty(name="Calibration Frames", default=20, min=3, soft_max=60,
+                                  description="Fit the actor's proportions on this many frames from the start of "
+                                              "the tracked range")
+    actor_file: StringProperty(name="Actor Calibration", subtype="FILE_PATH",
+                               description="actor.json of the calibration (written by Calibrate Actor, or of an "
+                                           "earlier take of the same actor)")
+    actor_summary: StringProperty(name="Calibrated Proportions", description="Fitted height and segment lengths")
+    use_actor: BoolProperty(name="Track with Calibration", default=False,
+                            description="Track with the actor's proportions and key the rig with the actor's "
+                                        "rotations (root path rescaled to the rig)")
 
     # ---- tracker
     algorithm: EnumProperty(name="Algorithm", items=ALGORITHMS, default="isa")

@@ -11,6 +11,7 @@ import sys
 COMMANDS = {
     "demo": "track the bundled sample scene and print its error against the ground truth",
     "track": "track a capture with a rigged subject and write the result folder",
+    "calibrate": "fit the actor's proportions (height, segment lengths) from the first frames; saves actor.json",
     "evaluate": "score a result folder: against ground-truth joints (3D error, PCK, plot) or, without them, against the learned evidence; contact sheet of the overlays",
     "compare": "run every optimiser on a capture at the same budget (the paper's Table 3)",
     "bench": "print speed figures of the likelihood engine (reference vs fast path)",

@@ -72,7 +72,14 @@ def _subject(args):
     from .cmd_track import open_subject
 
     scene = open_subject(args.scene or args.capture / "subject.blend")
-    return body_from_blender(find_armature(scene), None, scene)
+    body = body_from_blender(find_armature(scene), None, scene)
+    actor_file = Path(args.result) / "actor.json"
+    if actor_file.is_file():  # tracked with an actor calibration: the poses are the actor body's
+        from ..core.actor_file import load_actor, proportions_for_body
+        from ..core.proportions import scaled_body
+
+        body = scaled_body(body, proportions_for_body(load_actor(actor_file), body))
+    return body
 
 
 def _agreement(args, body, capture, proxy, frames, poses):

@@ -59,6 +59,12 @@ def add_arguments(p):
     p.add_argument("--resume", action="store_true", help="continue after the last solved frame in --out")
     p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
     p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
+    actor = p.add_mutually_exclusive_group()
+    actor.add_argument("--calibrate", action="store_true",
+                       help="fit the actor's proportions on the first frames first (saved as OUT/actor.json), then "
+                            "track with them and key the character with the actor's rotations")
+    actor.add_argument("--actor", type=Path, help="reuse a saved actor calibration (actor.json of an earlier take)")
+    p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 20 tracked)")
     add_tracking_options(p)
 
 
@@ -119,6 +125,31 @@ def run_session(session, progress=None, log=print):
     return session
 
 
+def load_actor_option(args, scene, armature, backend=None):
+    """The actor calibration for --actor FILE, or the one --calibrate fits now (saved in --out); None without."""
+    from ..core.actor_file import load_actor
+
+    if getattr(args, "actor", None) is not None:
+        return load_actor(args.actor)
+    if not getattr(args, "calibrate", False):
+        return None
+    if args.resume and (args.out / "actor.json").is_file():
+        return load_actor(args.out / "actor.json")  # the calibration the interrupted run used
+    from .actor_calibration import calibrate_actor, describe
+
+    frames = parse_frames(args.calibrate_frames)
+    if frames is None and args.frames:
+        from .actor_calibration import DEFAULT_FRAMES
+
+        frames = parse_frames(args.frames)[:DEFAULT_FRAMES]
+    fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args, backend),
+                                frames=frames,
+                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
+    for line in describe(fit):
+        print(f"actor: {line}", file=sys.stderr)
+    return load_actor(path)
+
+
 def run(args):
     from ..addon.scene_bridge import SubjectError, find_armature
     from ..core.render import BackendUnavailableError
@@ -134,9 +165,10 @@ def run(args):
         return 2
     try:
         armature = find_armature(scene, args.armature)
+        actor = load_actor_option(args, scene, armature, choice.used)
         session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args, choice.used),
                                frames=parse_frames(args.frames), resume=args.resume,
-                               log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
+                               log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), actor=actor)
     except (SubjectError, ValueError, FileNotFoundError, ResultWriteError) as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2

@@ -72,9 +72,14 @@ def build_session(context, log=None, step=None):
     settings.backend = choice.used
     props.backend_used = choice.summary  # the whole reason goes to report.json
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
+    extra = {}
+    if props.use_actor and props.actor_file:  # the Calibrate step's result (Subject panel)
+        from ..core.actor_file import load_actor
+
+        extra["actor"] = load_actor(bpy.path.abspath(props.actor_file))
     session = _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
                                frames=props.frame_range(), resume=props.resume, log=log, step=step,
-                               units=None if props.units == "auto" else props.units)
+                               units=None if props.units == "auto" else props.units, **extra)
     writer = getattr(session, "writer", None)
     if writer is not None:
         writer.info["backend"] = choice.to_dict()  # report.json

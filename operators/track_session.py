@@ -34,7 +34,7 @@ def _blender_version():
 
 class TrackSession:
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 mesh_obj=None, frame_offset=None, prior=None, log=None, units=None, step=None):
+                 mesh_obj=None, frame_offset=None, prior=None, log=None, units=None, step=None, actor=None):
         self.scene = scene
         self.armature = armature_obj
         self.settings = settings or TrackingSettings()
@@ -42,7 +42,16 @@ class TrackSession:
         # step(text, fraction): the one-off preparation before the first frame, as its own step;
         # step(None, 1.0) when it is over. May be called from the worker thread.
         self.step = step or (lambda text, fraction: None)
-        self.body = scene_bridge.body_from_blender(armature_obj, mesh_obj, scene)
+        # The user's character; with an actor calibration (the dict of core.actor_file.load_actor) the tracker
+        # poses the actor's body instead, and the character is keyed with the actor's rotations.
+        self.character = scene_bridge.body_from_blender(armature_obj, mesh_obj, scene)
+        self.actor = actor
+        self.body = self.character
+        if actor is not None:
+            from ..core.actor_file import proportions_for_body
+            from ..core.proportions import scaled_body
+
+            self.body = scaled_body(self.character, proportions_for_body(actor, self.character))
         self.capture = load_capture(capture_dir, units=units)
         if resolve_weights(self.settings.likelihood).needs_learned_evidence:
             require_model()  # a clear error now, not a traceback at the first frame
@@ -67,6 +76,11 @@ class TrackSession:
             "capture": str(Path(capture_dir).resolve()), "armature": armature_obj.name,
             "cameras": [c.name for c in self.capture.cameras], "preset": self.body.preset,
             "dof_names": self.body.dof_names}, blender_version=_blender_version())
+        if actor is not None:
+            self._keep_actor_file(actor)
+            self.writer.info["actor"] = {"height_m": actor.get("height_m"), "lengths_m": actor.get("lengths_m"),
+                                         "note": "joints.npz and poses.npz are the actor's; the animation files "
+                                                 "are the character's (rotations as solved, root path rescaled)"}
         self.frames = list(self.all_frames)
         self._resume_state = None
         if resume:
@@ -78,6 +92,20 @@ class TrackSession:
                 self.log(f"resuming after frame {done[-1].frame}: {len(done)} frames already solved")
         self._cancel = threading.Event()
 
+    def _keep_actor_file(self, actor):
+        """The result folder keeps the calibration it was tracked with (evaluate and later takes read it)."""
+        import json
+
+        path = self.writer.out / "actor.json"
+        if path.is_file():
+            try:
+                if json.loads(path.read_text()) == actor:
+                    return
+            except (OSError, ValueError):
+                pass
+        with atomic_path(path) as tmp:
+            Path(tmp).write_text(json.dumps(actor, indent=1))
+
     def prepare(self):
         """Build the prior, dynamics and tracker (engine only; safe off the main thread)."""
         if self.tracker is not None:
@@ -85,8 +113,9 @@ class TrackSession:
         step = self.step
         if self.prior is None:
             step("anatomical prior and dynamics for this rig (cached after the first run)", 0.0)
+            # the character's rig: the same angles, and its cache is reused whatever the actor's proportions
             self.prior, self.dynamics = build_motion_models(
-                self.body, self.capture_dir, self.capture.frames.fps, self.settings.seed,
+                self.character, self.capture_dir, self.capture.frames.fps, self.settings.seed,
                 progress=lambda fraction, text: step(text, 0.85 * fraction))
         step("tracker: background models and likelihood", 0.85)
         self.tracker = Tracker(self.body, self.capture, self.settings, prior=self.prior, dynamics=self.dynamics)
@@ -135,8 +164,19 @@ class TrackSession:
     def scene_frame(self, capture_frame):
         return capture_frame + self.frame_offset
 
+    def character_pose(self, pose):
+        """The pose the character is keyed with: the solved pose, or with an actor calibration the actor's
+        rotations with the root path rescaled to the character (about the first solved frame's root)."""
+        if self.actor is None:
+            return pose
+        from ..core.proportions import character_poses
+
+        first = self.writer.estimates[0].pose[self.body.translation_dofs[:2]] if self.writer.estimates else None
+        return character_poses(self.body, self.character, np.atleast_2d(pose), anchor_xy=first)[0]
+
     def key(self, estimate):
-        scene_bridge.key_pose(self.armature, self.body, estimate.pose, self.scene_frame(estimate.frame))
+        scene_bridge.key_pose(self.armature, self.character, self.character_pose(estimate.pose),
+                              self.scene_frame(estimate.frame))
 
     def key_all(self):
         for est in self.writer.estimates:

@@ -31,6 +31,7 @@ import subject  # noqa: E402
 from core.camera import BlenderCameraParams, Camera, camera_from_blender, camera_to_blender  # noqa: E402
 from core.capture.calibration import write_easymocap_calibration, write_toml_calibration  # noqa: E402
 from core.mocap import read_bvh, retarget  # noqa: E402
+from core.proportions import Proportions  # noqa: E402
 
 W, H, FPS = 640, 480, 30
 
@@ -88,6 +89,16 @@ SCENES = {
                            (23, 5, 6, 5, {"Left": "face", "Right": "face"}),
                            (39, 4, 5, 4, {"Left": "shoulder"}),
                            (50, 4, 3, 3, {"Right": "shoulder"})]),
+    # issue 15: the walk performed by an actor whose proportions differ from the subject the tracker is given
+    # (8 % shorter overall, forearms 10 % longer than that); the tracker gets walk's subject.blend unchanged,
+    # and the clip is placed so the actor starts where walk's subject was placed for.
+    "actor": dict(bvh="131_01.bvh", start=128, n_frames=40, seed=1515, uncontrolled=False, calibration="toml",
+                  cameras=[
+                      (35, 3.7, 1.55, 540, (6.5, -4.0), 1.0),
+                      (125, 3.3, 1.85, 520, (-5.0, 3.5), -1.5),
+                      (215, 3.8, 1.30, 580, (3.0, 7.0), 0.5),
+                      (300, 3.4, 1.70, 500, (-8.0, -2.5), -0.8)],
+                  proportions=dict(overall=0.92, factors={"forearm": 0.92 * 1.10}), subject_from="walk"),
 }
 MASK_FRAMES = 5
 
@@ -325,7 +336,7 @@ def evaluated_joints_and_floor(arm, body, names, F):
     return P, low
 
 
-def retarget_scene(cfg, data_dir, arm, F):
+def retarget_scene(cfg, data_dir, arm, F, first_hips_xy=None):
     clip = read_bvh(Path(data_dir) / "cmu" / cfg["bvh"]).resample(FPS)
     start = cfg["start"]
     if start + F > clip.n_frames:
@@ -333,9 +344,11 @@ def retarget_scene(cfg, data_dir, arm, F):
     clip = clip.subset(np.arange(start, start + F))
     names, parents, rest, tails = rest_arrays(arm)
     res = retarget(clip, rest, parents, names, target_tails=tails)
-    # centre the action at the origin (horizontally)
+    # centre the action at the origin (horizontally), or start it at first_hips_xy
     root_xy = res.pose_matrices[:, names.index("Hips"), :2, 3]
     shift = -(root_xy.min(axis=0) + root_xy.max(axis=0)) / 2
+    if first_hips_xy is not None:
+        shift = np.asarray(first_hips_xy, float) - root_xy[0]
     res = retarget(clip, rest, parents, names, target_tails=tails, translation=(shift[0], shift[1], 0.0))
     return clip, res, names, parents, rest, tails, shift
 
@@ -567,6 +580,19 @@ def save_subject_blend(data, path, hips_world0, yaw0, rng, colours=None, offset=
 
 
 
+def reuse_subject(source_dir, out, hips_world0, yaw0, hips_rest):
+    """The tracker's subject is another scene's subject.blend unchanged (the actor differs from it, not the
+    file); its placement error is measured against this scene's first frame."""
+    for name in ("subject.blend", "subject_source.json.gz"):
+        shutil.copy(source_dir / name, out / name)
+    M = np.array(json.loads((source_dir / "scene_info.json").read_text())["subject_placement"]["armature_matrix_world"])
+    hips = M[:3, :3] @ np.asarray(hips_rest, float) + M[:3, 3]
+    offset = hips[:2] - np.asarray(hips_world0[:2], float)
+    yaw = math.degrees(math.atan2(M[1, 0], M[0, 0]))
+    return dict(copied_from=source_dir.name, offset_m=offset.tolist(), offset_norm_m=float(np.linalg.norm(offset)),
+                yaw_error_deg=(yaw - math.degrees(yaw0) + 180) % 360 - 180, armature_matrix_world=M.tolist())
+
+
 # ---------------------------------------------------------------- main
 def build_scene(name, data_dir, out_root, samples, quick, render):
     cfg = SCENES[name]
@@ -578,8 +604,13 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     data = subject.load_subject_data(data_dir)
+    first_hips_xy = None
+    if cfg.get("proportions"):
+        subject_data = data
+        data = subject.scaled_subject_data(data, Proportions(**cfg["proportions"]))
+        first_hips_xy = json.loads((out_root / cfg["subject_from"] / "scene_info.json").read_text())["first_frame_hips"][:2]
     arm, body = subject.build_subject(bpy, data, colours=cfg.get("colours"))
-    clip, res, names, parents, rest, tails, shift = retarget_scene(cfg, data_dir, arm, F)
+    clip, res, names, parents, rest, tails, shift = retarget_scene(cfg, data_dir, arm, F, first_hips_xy)
     if cfg.get("gestures"):
         add_arm_gestures(res, names, parents, rest, cfg["gestures"])
     key_motion(arm, res, names)
@@ -690,7 +721,11 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     O = res.pose_matrices[0, rootb, :3, :3] @ rest[rootb, :3, :3].T   # root rotation from rest
     fwd = O @ np.array([0.0, -1.0, 0.0])                             # the rest pose faces -Y
     yaw0 = math.atan2(fwd[1], fwd[0]) - math.atan2(-1.0, 0.0)
-    placement = save_subject_blend(data, out / "subject.blend", hips[0], yaw0, rng, colours=cfg.get("colours"))
+    if cfg.get("subject_from"):
+        placement = reuse_subject(out_root / cfg["subject_from"], out, hips[0], yaw0,
+                                  subject_data["bones"]["Hips"]["head"])
+    else:
+        placement = save_subject_blend(data, out / "subject.blend", hips[0], yaw0, rng, colours=cfg.get("colours"))
     info = dict(scene=name, source=cfg["bvh"], first_source_frame_30fps=cfg["start"], n_frames=F, fps=FPS,
                 cameras=[c.name for c in cams], mask_frames=mask_frames, samples=samples, quick=quick,
                 floor_shift_m=dz, trajectory_shift_m=np.asarray(shift).tolist(), root_scale=res.root_scale,
@@ -707,6 +742,13 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
         info["second_person"] = second_info
     if cfg.get("colours"):
         info["clothing_colours_linear_rgb"] = cfg["colours"]
+    if cfg.get("proportions"):
+        info["actor"] = dict(
+            note="the body rendered differs from subject.blend (the tracker's subject): the subject's segments "
+                 "scaled by these factors (core.proportions); gt_joints.npz are the actor's joints",
+            proportions=cfg["proportions"],
+            true_segment_lengths_m=subject.segment_lengths_of(data, rest, names),
+            subject_segment_lengths_m=subject.segment_lengths_of(subject_data, rest, names))
     (out / "scene_info.json").write_text(json.dumps(info, indent=1))
     log(f"[{name}] done -> {out}")
 

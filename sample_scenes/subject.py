@@ -206,3 +206,44 @@ def build_subject(bpy, data, target_tris=5500, colours=None):
     mod.object = arm
     body.parent = arm
     return arm, body
+
+
+# ---------------------------------------------------------------- an actor of other proportions (issue 15)
+def _rig_arrays(data):
+    from core.rig_presets import match_preset
+
+    names = data["bone_names"]
+    parents = np.array([names.index(data["bones"][n]["parent"]) if data["bones"][n]["parent"] else -1 for n in names])
+    heads = np.array([data["bones"][n]["head"] for n in names], float)
+    tails = np.array([data["bones"][n]["tail"] for n in names], float)
+    return names, parents, heads, tails, match_preset(names)[1]
+
+
+def scaled_subject_data(data, proportions):
+    """The subject's data with `proportions` applied by the engine's own rule (core.proportions.scale_rest):
+    bones lengthened per segment, the skin moved with them, the soles kept on the floor."""
+    from core.proportions import bone_factors, scale_rest
+
+    names, parents, heads, tails, roles = _rig_arrays(data)
+    axes = (tails - heads) / np.linalg.norm(tails - heads, axis=1, keepdims=True)
+    own, link = bone_factors(names, parents, roles, proportions)
+    new_heads, verts = scale_rest(heads, axes, parents, np.arange(len(names)), own, link, data["verts"],
+                                  data["weights"], proportions.overall, np.array([0.0, 0.0, 1.0]))
+    out = dict(data, verts=verts, bones={})
+    for k, n in enumerate(names):
+        out["bones"][n] = dict(data["bones"][n], head=new_heads[k], tail=new_heads[k] + own[k] * (tails[k] - heads[k]))
+    return out
+
+
+def segment_lengths_of(data, rest, rest_names):
+    """core.proportions.segment_lengths of the body in `data` (rest orientations from `rest`, (B,4,4) of an
+    armature with the same bone directions, bones named `rest_names`)."""
+    from core.body import Skeleton, build_body
+    from core.proportions import segment_lengths
+
+    names, parents, heads, _, _ = _rig_arrays(data)
+    rest = np.array(rest, float)[[list(rest_names).index(n) for n in names]]
+    rest[:, :3, 3] = heads
+    faces = np.array([f[:3] for f in data["faces"]])
+    body = build_body(Skeleton(list(names), parents, rest), data["verts"], faces, data["weights"])
+    return segment_lengths(body)

@@ -19,7 +19,7 @@ from rig_helpers import build_armature
 pytestmark = pytest.mark.bpy
 
 PANELS = ("MOCAP_PT_capture", "MOCAP_PT_subject", "MOCAP_PT_track", "MOCAP_PT_results")
-OPERATOR_MODULES = ("import_capture", "setup_subject", "track", "export")
+OPERATOR_MODULES = ("import_capture", "setup_subject", "calibrate", "track", "export")
 
 
 def _module(addon_module_name, name):
@@ -459,7 +459,8 @@ def test_session_reports_its_preparation_as_steps(monkeypatch, tmp_path):
 
     session = track_session.TrackSession.__new__(track_session.TrackSession)
     session.tracker, session.prior = None, None
-    session.body, session.capture_dir, session.settings = None, tmp_path, type("S", (), {"seed": 0})()
+    session.body, session.character = None, None
+    session.capture_dir, session.settings = tmp_path, type("S", (), {"seed": 0})()
     session.capture = type("C", (), {"frames": type("F", (), {"fps": 30.0})()})()
     session.step = lambda text, fraction: calls.append((text, fraction))
     monkeypatch.setattr(track_session, "build_motion_models", fake_build)

@@ -1,0 +1,39 @@
+"""`calibrate`: fit the actor's proportions from the first frames of a capture and save OUT/actor.json."""
+import sys
+from pathlib import Path
+
+from .cmd_track import StepPrinter, add_tracking_options, open_subject, parse_frames, settings_from_args
+
+
+def add_arguments(p):
+    p.add_argument("--scene", type=Path,
+                   help="SUBJECT.blend with the rig (not needed inside blender --background SUBJECT.blend)")
+    p.add_argument("--capture", type=Path, required=True, help="capture folder")
+    p.add_argument("--out", type=Path, required=True,
+                   help="folder for actor.json (and calibration_frames/, the frames it tracked)")
+    p.add_argument("--frames", help="capture frames A-B to calibrate on (default: the first 20)")
+    p.add_argument("--armature", help="armature to use if the scene has several")
+    p.add_argument("--asymmetric", action="store_true",
+                   help="fit the left and right limbs separately (default: one length per segment for both sides)")
+    add_tracking_options(p)
+
+
+def run(args):
+    from ..addon.scene_bridge import SubjectError, find_armature
+    from ..core.proportions_fit import ProportionsFitError
+    from ..core.results import ResultWriteError
+    from .actor_calibration import calibrate_actor, describe
+
+    scene = open_subject(args.scene)
+    try:
+        armature = find_armature(scene, args.armature)
+        fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args),
+                                    frames=parse_frames(args.frames), log=lambda m: print(m, file=sys.stderr),
+                                    step=StepPrinter(), symmetric=not args.asymmetric)
+    except (SubjectError, ProportionsFitError, ValueError, FileNotFoundError, ResultWriteError) as exc:
+        print(f"markerless_mocap calibrate: {exc}", file=sys.stderr)
+        return 2
+    for line in describe(fit):
+        print(line)
+    print(f"saved {path}; track later takes with --actor {path}", file=sys.stderr)
+    return 0

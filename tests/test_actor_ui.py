@@ -1,0 +1,153 @@
+"""Actor calibration in Blender (issue 15): the Calibrate step of the Subject panel, the copy of the rig with
+the actor's proportions, and the saved calibration's round trip through the command line."""
+import importlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rig_helpers import subject_blend_path
+
+pytestmark = pytest.mark.bpy
+
+FACTORS = {"forearm": 1.012, "thigh": 0.95}
+OVERALL = 0.92
+
+
+def _fit(body, proportions_mod, fit_mod):
+    """A ProportionsFit of known proportions (what calibrate_actor returns), for the wiring tests."""
+    p = proportions_mod.Proportions(FACTORS, OVERALL)
+    actor = proportions_mod.scaled_body(body, p)
+    return fit_mod.ProportionsFit(p, proportions_mod.segment_lengths(actor), proportions_mod.segment_lengths(body),
+                                  [0, 1, 2], 0.02, 0.01, np.zeros((3, body.n_dof)))
+
+
+@pytest.fixture
+def subject_with_actor(addon_module_name, bpy_module, tmp_path):
+    bpy = bpy_module
+    mod = lambda name: importlib.import_module(f"{addon_module_name}.{name}")
+    bpy.ops.wm.open_mainfile(filepath=str(subject_blend_path()))
+    bridge = mod("addon.scene_bridge")
+    arm = bridge.find_armature(bpy.context.scene)
+    body = bridge.body_from_blender(arm, None, bpy.context.scene)
+    fit = _fit(body, mod("core.proportions"), mod("core.proportions_fit"))
+    path = mod("core.actor_file").save_actor(tmp_path / "actor.json", fit, subject_name=arm.name)
+    return bpy, mod, arm, body, fit, path
+
+
+def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypatch, tmp_path):
+    bpy, mod, arm, body, fit, path = subject_with_actor
+    calls = {}
+
+    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, **_):
+        calls.update(armature=armature.name, frames=list(frames), out=out_dir)
+        return fit, path
+
+    monkeypatch.setattr(mod("operators.actor_calibration"), "calibrate_actor", fake_calibrate)
+    props = bpy.context.scene.mocap
+    props.capture_dir, props.output_dir = str(tmp_path), str(tmp_path / "out")
+    props.use_frame_range, props.frame_start, props.frame_end, props.calibrate_frames = True, 5, 40, 12
+    assert bpy.ops.mocap.calibrate_actor() == {"FINISHED"}
+    assert calls["armature"] == arm.name and calls["frames"] == list(range(5, 17))
+    assert props.actor_file == str(path) and props.use_actor
+    lines = props.actor_summary.splitlines()
+    assert lines[0] == f"height {fit.lengths['height']:.3f} m (rig {fit.subject_lengths['height']:.3f} m)"
+    assert any(line.startswith("forearm ") and "x1.012" in line for line in lines)
+    # the panel shows them, with the copy button
+    props.subject_checked, props.subject_dofs = True, 30
+    from test_addon_ui import _draw_all
+
+    log = _draw_all(bpy)
+    labels = [e[1] for e in log if e[0] == "label"]
+    assert lines[0] in labels and ("operator", "mocap.apply_actor_copy") in log
+    assert ("prop", "calibrate_frames") in log and ("prop", "use_actor") in log
+
+
+def test_calibrate_without_capture_names_the_fix(subject_with_actor):
+    bpy = subject_with_actor[0]
+    with pytest.raises(RuntimeError, match="No capture folder"):
+        bpy.ops.mocap.calibrate_actor()
+
+
+def test_apply_to_a_copy_scales_the_copy_and_keeps_the_rig(subject_with_actor):
+    """The copy's bones and skin are the engine's scaled body, and Blender deforms the copy's skin exactly as
+    the engine's FK + LBS deform the scaled body (so what the user inspects is what was tracked)."""
+    bpy, mod, arm, body, fit, path = subject_with_actor
+    props = bpy.context.scene.mocap
+    props.actor_file = str(path)
+    heads_before = np.array([b.head_local for b in arm.data.bones])
+    assert bpy.ops.mocap.apply_actor_copy() == {"FINISHED"}
+    copy = bpy.data.objects[arm.name + "_actor"]
+    np.testing.assert_allclose(np.array([b.head_local for b in arm.data.bones]), heads_before)  # rig untouched
+    actor = mod("core.proportions").scaled_body(body, mod("core.proportions").Proportions(FACTORS, OVERALL))
+    np.testing.assert_allclose(np.array([b.head_local for b in copy.data.bones]), actor.skeleton.rest[:, :3, 3],
+                               atol=2e-6)
+    fore = copy.data.bones["LeftForeArm"].length / arm.data.bones["LeftForeArm"].length
+    assert fore == pytest.approx(1.012, rel=1e-5)
+    bridge = mod("addon.scene_bridge")
+    mesh = bridge.find_skinned_mesh(copy, bpy.context.scene)
+    copied = bridge.body_from_blender(copy, mesh, bpy.context.scene)
+    rng = np.random.default_rng(3)
+    pose = copied.default_pose()
+    pose[6:] = np.clip(rng.normal(0, 0.3, copied.n_dof - 6), copied.lower[6:], copied.upper[6:])
+    bridge.apply_pose(copy, copied, pose)
+    dg = bpy.context.evaluated_depsgraph_get()
+    ev = mesh.evaluated_get(dg)
+    me = ev.to_mesh()
+    co = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    M = np.array(ev.matrix_world)
+    blender = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+    ev.to_mesh_clear()
+    np.testing.assert_allclose(actor.deform(pose[None])[0], blender, atol=1e-5)
+
+
+def test_cli_reuses_a_saved_calibration_and_refuses_a_bad_one(subject_with_actor, tmp_path):
+    bpy, mod, arm, body, fit, path = subject_with_actor
+    actor_file = mod("core.actor_file")
+    data = actor_file.load_actor(path)
+    again = actor_file.proportions_for_body(data, body)  # same rig: the saved factors exactly
+    assert again.factors == fit.proportions.factors and again.overall == fit.proportions.overall
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "something else"}')
+    with pytest.raises(actor_file.ActorFileError, match="not an actor calibration"):
+        actor_file.load_actor(bad)
+    with pytest.raises(actor_file.ActorFileError, match="no actor calibration there"):
+        actor_file.load_actor(tmp_path / "missing")
+    run = subprocess.run([sys.executable, "-m", "markerless_mocap", "track", "--scene", str(subject_blend_path()),
+                          "--capture", str(tmp_path), "--out", str(tmp_path / "o"), "--actor", str(bad)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith("markerless_mocap track: ") and "not an actor calibration" in last
+
+
+def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
+    """`track --calibrate` end to end (a tiny search budget, 3 calibration frames, 2 tracked): OUT/actor.json is
+    written, joints.npz holds the calibrated actor's bones (its forearm length), and the BVH the rig's own
+    bones (the character is keyed, not stretched)."""
+    import json
+
+    from markerless_mocap.core.actor_file import load_actor
+
+    scene = subject_blend_path().parents[1] / "actor"
+    out = tmp_path / "r"
+    run = subprocess.run([sys.executable, "-m", "markerless_mocap", "track", "--scene", str(scene / "subject.blend"),
+                          "--capture", str(scene), "--out", str(out), "--calibrate", "--calibrate-frames", "0-2",
+                          "--frames", "0-1", "--particles", "10", "--iterations", "2", "--refine", "none",
+                          "--no-overlays"], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "actor: height" in run.stderr
+    actor = load_actor(out / "actor.json")
+    assert actor["frames"] == [0, 1, 2] and 1.3 < actor["height_m"] < 1.8
+    assert json.loads((out / "report.json").read_text())["actor"]["lengths_m"] == actor["lengths_m"]
+    with np.load(out / "joints.npz") as z:
+        names, P = [str(n) for n in z["names"]], z["positions"]
+    fore = np.linalg.norm(P[:, names.index("LeftHand")] - P[:, names.index("LeftForeArm")], axis=1)
+    np.testing.assert_allclose(fore, actor["lengths_m"]["l_forearm"], rtol=1e-6)
+    rig_fore = actor["subject_lengths_m"]["l_forearm"]
+    text = (out / "animation.bvh").read_text().split("JOINT LeftHand", 1)[1]
+    offset = np.array([float(v) for v in text.split("OFFSET", 1)[1].split("\n", 1)[0].split()])
+    assert np.linalg.norm(offset) == pytest.approx(rig_fore, rel=1e-4)  # the character's forearm in the BVH
+    assert abs(rig_fore - actor["lengths_m"]["l_forearm"]) > 1e-3

@@ -1,0 +1,104 @@
+"""Actor proportions (issue 15): the scaled body, and the fit that recovers it from landmarks."""
+import numpy as np
+import pytest
+
+from markerless_mocap.core.capture.calibration import read_calibration
+from markerless_mocap.core.keypoints import rig_keypoints
+from markerless_mocap.core.proportions import Proportions, ProportionsError, scaled_body, segment_lengths
+from markerless_mocap.core.proportions_fit import fit_proportions, proportions_for_lengths
+
+from scene_helpers import ground_truth_poses, scene_dir
+
+ACTOR = Proportions({"forearm": 0.92 * 1.10, "thigh": 0.95, "shoulder_width": 0.97}, 0.92)
+
+
+@pytest.fixture
+def walk(bpy_module):
+    body, frames, poses, _ = ground_truth_poses("walk")  # cached across tests
+    return body, poses
+
+
+def test_scaled_body_lengths_follow_the_factors(walk):
+    body, _ = walk
+    actor = scaled_body(body, ACTOR)
+    a, s = segment_lengths(actor), segment_lengths(body)
+    assert a["forearm"] / s["forearm"] == pytest.approx(0.92 * 1.10, rel=1e-9)
+    assert a["thigh"] / s["thigh"] == pytest.approx(0.95, rel=1e-9)
+    assert a["upper_arm"] / s["upper_arm"] == pytest.approx(0.92, rel=1e-9)
+    assert a["neck"] / s["neck"] == pytest.approx(0.92, rel=1e-9)
+    # the scaled body stands on the same floor and is shorter by about the overall factor
+    up = np.array([0.0, 0.0, 1.0])
+    world = lambda b: b.vertices @ b.skeleton.armature_matrix[:3, :3].T + b.skeleton.armature_matrix[:3, 3]
+    assert (world(actor) @ up).min() == pytest.approx((world(body) @ up).min(), abs=1e-9)
+    assert 0.90 < a["height"] / s["height"] < 0.94
+
+
+def test_scaled_body_skin_follows_its_bones(walk):
+    """FK + LBS of the scaled body: each vertex keeps its place relative to the bones that carry it, so the
+    posed skin of a longer forearm still ends at the (moved) hand."""
+    body, poses = walk
+    actor = scaled_body(body, ACTOR)
+    main = np.argmax(body.weights, axis=1)
+    rigid = np.nonzero(body.weights.max(axis=1) > 1 - 1e-9)[0]  # vertices carried by one bone alone
+    assert len(rigid) > 100
+    x = poses[10:11]
+    for b in (body, actor):
+        v = b.deform(x)[0][rigid]
+        M = b.pose_matrices(x)[0, main[rigid]]
+        local = np.einsum("vji,vj->vi", M[:, :3, :3], v - M[:, :3, 3])
+        R = b.skeleton.rest[main[rigid]]
+        rest_local = np.einsum("vji,vj->vi", R[:, :3, :3], b.vertices[rigid] - R[:, :3, 3])
+        np.testing.assert_allclose(local, rest_local, rtol=0, atol=1e-6)
+    # the head's skin is only resized by the overall factor (it keeps its shape)
+    head = np.nonzero(main == body.skeleton.index["Head"])[0]
+    assert len(head) > 20
+    size = lambda b: np.ptp(b.vertices[head], axis=0).max()
+    assert size(actor) / size(body) == pytest.approx(0.92, rel=0.03)
+
+
+def test_bad_factor_is_refused_with_the_fix():
+    with pytest.raises(ProportionsError, match="outside 0.5-2.0"):
+        Proportions({"forearm": 3.0})
+    with pytest.raises(ProportionsError, match="unknown segment 'tail'"):
+        Proportions({"tail": 1.0})
+
+
+def _synthetic_landmarks(actor, cameras, poses, rng, noise_px):
+    rig = rig_keypoints(actor)
+    world = rig.world(actor, poses)
+    uv = np.zeros((len(poses), len(cameras), 33, 2))
+    vis = np.zeros((len(poses), len(cameras), 33))
+    for c, cam in enumerate(cameras):
+        p = cam.project(world.reshape(-1, 3)).reshape(len(poses), -1, 2)
+        uv[:, c, rig.landmarks] = p + rng.normal(0, noise_px, p.shape)
+        vis[:, c, rig.landmarks] = 0.9
+    return uv, vis
+
+
+def test_fit_recovers_known_proportions_from_landmarks(walk):
+    """Landmarks projected from a scaled body (1.5 px noise) into the walk cameras, the subject's true poses
+    as starting points: every fitted segment within 3 % of the truth, and the residual drops."""
+    body, poses = walk
+    actor = scaled_body(body, ACTOR)
+    cameras = read_calibration(scene_dir("walk"))
+    frames = np.arange(0, 60, 10)
+    uv, vis = _synthetic_landmarks(actor, cameras, poses[frames], np.random.default_rng(0), 1.5)
+    fit = fit_proportions(body, cameras, uv, vis, poses[frames], frames=frames)
+    truth = segment_lengths(actor)
+    for seg in ("spine", "shoulder_width", "upper_arm", "forearm", "hip_width", "thigh", "shin", "height"):
+        assert fit.lengths[seg] == pytest.approx(truth[seg], rel=0.03), seg
+    assert fit.rms_after < 0.5 * fit.rms_before
+    # and the same fit on the unscaled subject's own landmarks stays at 1 (no drift)
+    uv, vis = _synthetic_landmarks(body, cameras, poses[frames], np.random.default_rng(1), 1.5)
+    fit = fit_proportions(body, cameras, uv, vis, poses[frames], frames=frames)
+    for seg in ("upper_arm", "forearm", "thigh", "shin"):
+        assert fit.proportions.factor(seg) == pytest.approx(1.0, abs=0.02), seg
+
+
+def test_lengths_carry_over_to_another_rig(walk):
+    body, _ = walk
+    target = segment_lengths(scaled_body(body, ACTOR))
+    other = scaled_body(body, Proportions.uniform(1.1))  # a bigger character receives the actor's lengths
+    got = segment_lengths(scaled_body(other, proportions_for_lengths(other, target)))
+    for seg in ("spine", "neck", "shoulder_width", "upper_arm", "forearm", "hip_width", "thigh", "shin", "foot"):
+        assert got[seg] == pytest.approx(target[seg], rel=2e-3), seg
