@@ -147,6 +147,19 @@ def key_pose(armature_obj, body, pose, frame, root_anchor=None):
         pb.keyframe_insert(path, frame=frame, group=pb.name)
 
 
+def evaluated_world_vertices(context, mesh_obj):
+    """(V,3) world positions of a mesh's vertices as Blender evaluates them now (modifiers, armature)."""
+    evaluated = mesh_obj.evaluated_get(context.evaluated_depsgraph_get())
+    mesh = evaluated.to_mesh()
+    try:
+        co = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", co)
+        M = np.array(evaluated.matrix_world)
+        return co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+    finally:
+        evaluated.to_mesh_clear()
+
+
 def blender_joint_positions(armature_obj):
     """(B,3) world head positions as Blender evaluates them (bone order of the armature data)."""
     A = np.array(armature_obj.matrix_world)

@@ -92,14 +92,7 @@ def test_apply_to_a_copy_scales_the_copy_and_keeps_the_rig(subject_with_actor):
     pose = copied.default_pose()
     pose[6:] = np.clip(rng.normal(0, 0.3, copied.n_dof - 6), copied.lower[6:], copied.upper[6:])
     bridge.apply_pose(copy, copied, pose)
-    dg = bpy.context.evaluated_depsgraph_get()
-    ev = mesh.evaluated_get(dg)
-    me = ev.to_mesh()
-    co = np.empty(len(me.vertices) * 3)
-    me.vertices.foreach_get("co", co)
-    M = np.array(ev.matrix_world)
-    blender = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
-    ev.to_mesh_clear()
+    blender = bridge.evaluated_world_vertices(bpy.context, mesh)
     np.testing.assert_allclose(actor.deform(pose[None])[0], blender, atol=1e-5)
 
 

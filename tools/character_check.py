@@ -16,18 +16,11 @@ from pathlib import Path
 import numpy as np
 
 
-def _lowest_skin_z(bpy, mesh_obj, frames):
+def _lowest_skin_z(bpy, bridge, mesh_obj, frames):
     out = []
     for f in frames:
         bpy.context.scene.frame_set(f)
-        dg = bpy.context.evaluated_depsgraph_get()
-        ev = mesh_obj.evaluated_get(dg)
-        me = ev.to_mesh()
-        co = np.empty(len(me.vertices) * 3)
-        me.vertices.foreach_get("co", co)
-        M = np.array(ev.matrix_world)
-        out.append(float((co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3])[:, 2].min()))
-        ev.to_mesh_clear()
+        out.append(float(bridge.evaluated_world_vertices(bpy.context, mesh_obj)[:, 2].min()))
     return np.array(out)
 
 
@@ -73,7 +66,7 @@ def check_character(bpy, package, subject_blend, poses, proportions, out_dir, ac
     frames = list(range(1, len(poses) + 1))
     for f, x in zip(frames, char_poses):
         bridge.key_pose(char_arm, character, x, f)
-    char_low = _lowest_skin_z(bpy, char_mesh, frames)
+    char_low = _lowest_skin_z(bpy, bridge, char_mesh, frames)
     char_toes = _toe_heights(bpy, char_arm, frames)
     lengths = _bone_lengths(char_arm)
     subject_lengths = {n: float(np.linalg.norm(subject.skeleton.rest[i, :3, 3]
