@@ -25,6 +25,11 @@ def save_actor(path, fit, subject_name="", capture=""):
             "factors": fit.proportions.factors, "overall": fit.proportions.overall,
             "height_m": fit.lengths["height"], "lengths_m": fit.lengths, "subject_lengths_m": fit.subject_lengths,
             "landmark_rms_m": {"subject": fit.rms_before, "calibrated": fit.rms_after}}
+    return write_actor(path, data)
+
+
+def write_actor(path, data):
+    """Write an actor calibration dict (as load_actor returns it) to `path`, atomically."""
     path = Path(path)
     with atomic_path(path) as tmp:
         Path(tmp).write_text(json.dumps(data, indent=1))
@@ -49,6 +54,13 @@ def load_actor(path):
     if not isinstance(data.get("lengths_m"), dict) or not isinstance(data.get("factors"), dict):
         raise ActorFileError(f"{path}: the calibration has no segment lengths; calibrate again to rewrite it")
     return data
+
+
+def actor_body(data, body):
+    """`body` (the user's rig) with the calibrated actor's proportions: the body the tracker poses."""
+    from .proportions import scaled_body
+
+    return scaled_body(body, proportions_for_body(data, body))
 
 
 def proportions_for_body(data, body, tolerance=1e-6):

@@ -33,16 +33,16 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         from ..core.proportions_fit import ProportionsFitError
         from .actor_calibration import calibrate_actor, describe
         from .setup_subject import subject_armature
-        from .track import TrackSetupError, output_folder
+        from .track import TrackSetupError, output_folder, run_settings
 
         props = context.scene.mocap
         try:
             if not props.capture_dir:
                 raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
             armature = subject_armature(context)
+            settings, _ = run_settings(context)
             fit, path = calibrate_actor(context.scene, armature, Path(bpy.path.abspath(props.capture_dir)),
-                                        output_folder(context), props.tracking_settings(),
-                                        frames=_calibration_frames(props))
+                                        output_folder(context), settings, frames=_calibration_frames(props))
         except (ValueError, ProportionsFitError, FileNotFoundError, OSError) as exc:
             props.last_error = str(exc)
             self.report({"ERROR"}, str(exc))

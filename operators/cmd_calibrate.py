@@ -21,16 +21,20 @@ def add_arguments(p):
 def run(args):
     from ..addon.scene_bridge import SubjectError, find_armature
     from ..core.proportions_fit import ProportionsFitError
+    from ..core.render import BackendUnavailableError
     from ..core.results import ResultWriteError
     from .actor_calibration import calibrate_actor, describe
+    from .backend_choice import choose_backend
 
     scene = open_subject(args.scene)
     try:
+        backend = choose_backend(args.backend).used  # as track does: --backend gpu installs the GPU path
         armature = find_armature(scene, args.armature)
-        fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args),
+        fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args, backend),
                                     frames=parse_frames(args.frames), log=lambda m: print(m, file=sys.stderr),
                                     step=StepPrinter(), symmetric=not args.asymmetric)
-    except (SubjectError, ProportionsFitError, ValueError, FileNotFoundError, ResultWriteError) as exc:
+    except (SubjectError, ProportionsFitError, ValueError, FileNotFoundError, ResultWriteError,
+            BackendUnavailableError) as exc:
         print(f"markerless_mocap calibrate: {exc}", file=sys.stderr)
         return 2
     for line in describe(fit):

@@ -75,10 +75,9 @@ def _subject(args):
     body = body_from_blender(find_armature(scene), None, scene)
     actor_file = Path(args.result) / "actor.json"
     if actor_file.is_file():  # tracked with an actor calibration: the poses are the actor body's
-        from ..core.actor_file import load_actor, proportions_for_body
-        from ..core.proportions import scaled_body
+        from ..core.actor_file import actor_body, load_actor
 
-        body = scaled_body(body, proportions_for_body(load_actor(actor_file), body))
+        body = actor_body(load_actor(actor_file), body)
     return body
 
 

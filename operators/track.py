@@ -48,22 +48,14 @@ def output_folder(context):
     return Path(bpy.path.abspath(folder))
 
 
-def build_session(context, log=None, step=None):
-    """Read the scene's settings and construct the tracking session (main thread).
-
-    `log(message)` receives the session's messages, `step(text, fraction)` its one-off preparation
-    (text None when it is over); both may be called from any thread.
-    """
+def run_settings(context):
+    """The Track panel's TrackingSettings with the backend resolved (the preferences' choice, the GPU probed)
+    and that choice, shown in the panel; a TrackSetupError naming the fix when it cannot run here."""
     from ..addon.preferences import effective_backend
-    from .setup_subject import subject_armature
-
-    props = context.scene.mocap
-    if not props.capture_dir:
-        raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
-    armature = subject_armature(context)
     from ..core.render import BackendUnavailableError
     from .backend_choice import choose_backend
 
+    props = context.scene.mocap
     settings = props.tracking_settings()
     try:
         choice = choose_backend(effective_backend(context, props.backend))
@@ -71,6 +63,22 @@ def build_session(context, log=None, step=None):
         raise TrackSetupError(str(exc)) from exc
     settings.backend = choice.used
     props.backend_used = choice.summary  # the whole reason goes to report.json
+    return settings, choice
+
+
+def build_session(context, log=None, step=None):
+    """Read the scene's settings and construct the tracking session (main thread).
+
+    `log(message)` receives the session's messages, `step(text, fraction)` its one-off preparation
+    (text None when it is over); both may be called from any thread.
+    """
+    from .setup_subject import subject_armature
+
+    props = context.scene.mocap
+    if not props.capture_dir:
+        raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
+    armature = subject_armature(context)
+    settings, choice = run_settings(context)
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
     extra = {}
     if props.use_actor and props.actor_file:  # the Calibrate step's result (Subject panel)

@@ -48,10 +48,9 @@ class TrackSession:
         self.actor = actor
         self.body = self.character
         if actor is not None:
-            from ..core.actor_file import proportions_for_body
-            from ..core.proportions import scaled_body
+            from ..core.actor_file import actor_body
 
-            self.body = scaled_body(self.character, proportions_for_body(actor, self.character))
+            self.body = actor_body(actor, self.character)
         self.capture = load_capture(capture_dir, units=units)
         if resolve_weights(self.settings.likelihood).needs_learned_evidence:
             require_model()  # a clear error now, not a traceback at the first frame
@@ -96,6 +95,8 @@ class TrackSession:
         """The result folder keeps the calibration it was tracked with (evaluate and later takes read it)."""
         import json
 
+        from ..core.actor_file import write_actor
+
         path = self.writer.out / "actor.json"
         if path.is_file():
             try:
@@ -103,8 +104,7 @@ class TrackSession:
                     return
             except (OSError, ValueError):
                 pass
-        with atomic_path(path) as tmp:
-            Path(tmp).write_text(json.dumps(actor, indent=1))
+        write_actor(path, actor)
 
     def prepare(self):
         """Build the prior, dynamics and tracker (engine only; safe off the main thread)."""
