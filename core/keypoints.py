@@ -56,6 +56,11 @@ VISIBILITY_FLOOR = 0.25
 ALTERNATIVE_COST_PER_LOGIT = 0.25
 
 
+def landmark_weights(visibility):
+    """A landmark's weight from its visibility: VISIBILITY_FLOOR + (1 - VISIBILITY_FLOOR) x visibility."""
+    return VISIBILITY_FLOOR + (1 - VISIBILITY_FLOOR) * np.asarray(visibility, dtype=np.float64)
+
+
 class KeypointMapError(ValueError):
     """The rig lacks a bone a landmark needs."""
 
@@ -78,7 +83,7 @@ def _front_vertex(body, role):
     sk = body.skeleton
     part = body.part_names.index(role)
     vertex_part = body.bone_part[np.argmax(body.weights, axis=1)]
-    end = sk.rest[_end_bone(body, role), :3, 3]
+    end = sk.rest[end_bone(body, role), :3, 3]
     frame_forward, frame_up = _rest_axes(body)
     candidates = np.nonzero((vertex_part == part) & ((body.vertices - end) @ frame_up > 0))[0]
     if len(candidates) == 0:
@@ -94,7 +99,7 @@ def _rest_axes(body):
     return frame.forward, frame.up
 
 
-def _end_bone(body, role):
+def end_bone(body, role):
     sk = body.skeleton
     last = sk.index[body.roles[role][-1]]
     children = sk.children_of(last)
@@ -119,7 +124,7 @@ def rig_keypoints(body):
             p = sk.rest[b, :3, 3]
         elif where == "end":
             b = sk.index[body.roles[role][-1]]
-            p = sk.rest[_end_bone(body, role), :3, 3]
+            p = sk.rest[end_bone(body, role), :3, 3]
         else:
             b, p = _front_vertex(body, role)
         landmarks.append(lm)
@@ -177,7 +182,7 @@ class KeypointTargets:
     @classmethod
     def from_evidence(cls, evidence, rig_points, margin, alternatives=True):
         uv = np.stack([ev.keypoints[rig_points.landmarks] for ev in evidence])
-        weight = np.stack([VISIBILITY_FLOOR + (1 - VISIBILITY_FLOOR) * ev.visibility[rig_points.landmarks]
+        weight = np.stack([landmark_weights(ev.visibility[rig_points.landmarks])
                            if ev.found else np.zeros(len(rig_points.landmarks)) for ev in evidence])
         size = np.array([ev.box.size / margin if ev.box is not None else 1.0 for ev in evidence])
         uv = np.where(np.isfinite(uv), uv, 0.0)

@@ -157,14 +157,15 @@ def _head(body, role, k=0):
 
 
 def _end(body, role):
-    """The head of the child that continues the role's last bone (hand, toe, head bone)."""
+    """The head of the child that continues the role's last bone (hand, toe, head bone); the last bone's own
+    head when it has no child."""
+    from .keypoints import KeypointMapError, end_bone
+
     sk = body.skeleton
-    last = sk.index[body.roles[role][-1]]
-    children = sk.children_of(last)
-    if not children:
-        return sk.rest[last, :3, 3] + 0.0
-    heads = sk.rest[children, :3, 3] - sk.rest[last, :3, 3]
-    return sk.rest[children[int(np.argmax(heads @ sk.rest[last, :3, 1]))], :3, 3]
+    try:
+        return sk.rest[end_bone(body, role), :3, 3]
+    except KeypointMapError:
+        return sk.rest[sk.index[body.roles[role][-1]], :3, 3] + 0.0
 
 
 def segment_lengths(body):

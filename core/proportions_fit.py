@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .keypoint_fit import align_root, triangulated_landmarks
-from .keypoints import VISIBILITY_FLOOR, KeypointTargets, rig_keypoints
+from .keypoints import KeypointTargets, landmark_weights, rig_keypoints
 from .proportions import SEGMENTS, Proportions, scaled_body, segment_lengths
 
 MIN_FRAMES = 3           # frames with enough triangulated landmarks to fit proportions at all
@@ -48,7 +48,7 @@ def targets_from_landmarks(uv, visibility, rig_points):
     uv = np.asarray(uv, float)[:, rig_points.landmarks]
     vis = np.asarray(visibility, float)[:, rig_points.landmarks]
     found = np.asarray(visibility, float).max(axis=1) > 0  # a view without evidence has visibility 0
-    weight = np.where(found[:, None], VISIBILITY_FLOOR + (1 - VISIBILITY_FLOOR) * vis, 0.0)
+    weight = np.where(found[:, None], landmark_weights(vis), 0.0)
     ok = np.isfinite(uv).all(axis=2)
     return KeypointTargets(np.where(ok[..., None], uv, 0.0), np.where(ok, weight, 0.0), np.ones(len(uv)))
 
