@@ -131,6 +131,7 @@ class Body:
         self.root_bone = int(root_bone)
         self.roles = dict(roles or {})
         self.preset = preset
+        self._last_skinning = None  # (poses, matrices) of the last skinning_matrices call
         self._compile()
 
     # ------------------------------------------------------------------ layout
@@ -140,6 +141,15 @@ class Body:
         for i, dof in enumerate(self.dofs):
             for tgt in dof.targets:
                 self.bone_dofs[tgt.bone].append((i, np.asarray(tgt.axis_local, float), float(tgt.share)))
+        # The same rotations flattened, so local_bases makes all of them in one call (the root's own
+        # basis is built from its rotation vector instead).
+        terms = [(b, i, axis, share) for b in range(B) if b != self.root_bone for i, axis, share in self.bone_dofs[b]]
+        self._term_dof = np.array([t[1] for t in terms], dtype=np.int64)
+        self._term_axis = np.array([t[2] for t in terms], dtype=np.float64).reshape(-1, 3)
+        self._term_share = np.array([t[3] for t in terms], dtype=np.float64)
+        self._bone_terms = {}
+        for k, (b, *_rest) in enumerate(terms):
+            self._bone_terms.setdefault(b, []).append(k)
         self.lower = np.array([d.lower for d in self.dofs])
         self.upper = np.array([d.upper for d in self.dofs])
         self.scale = np.array([TRANSLATION_SCALE if d.kind == "translation" else ANGLE_SCALE for d in self.dofs])
@@ -189,9 +199,12 @@ class Body:
         poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
         P, B = poses.shape[0], self.skeleton.n_bones
         basis = np.broadcast_to(np.eye(4), (P, B, 4, 4)).copy()
-        for b in range(B):
-            for i, axis, share in self.bone_dofs[b]:
-                basis[:, b, :3, :3] = basis[:, b, :3, :3] @ axis_angle_matrix(axis, poses[:, i] * share)
+        rotations = axis_angle_matrix(self._term_axis, poses[:, self._term_dof] * self._term_share)  # (P,T,3,3)
+        for b, terms in self._bone_terms.items():  # each bone's rotations in multiplication order
+            product = rotations[:, terms[0]]
+            for k in terms[1:]:
+                product = product @ rotations[:, k]
+            basis[:, b, :3, :3] = product
         basis[:, self.root_bone] = self._root_basis(poses, root_anchor)
         return basis
 
@@ -225,8 +238,21 @@ class Body:
         return sk.armature_matrix @ pose if world else pose
 
     def skinning_matrices(self, poses, root_anchor=None):
-        """(P,B,4,4): world <- rest armature space, per bone."""
-        return self.pose_matrices(poses, root_anchor) @ self.skeleton.inv_rest
+        """(P,B,4,4): world <- rest armature space, per bone (read-only).
+
+        The likelihood asks twice for the same batch (the proxy's skin, then the landmarks' rig points), so
+        the last batch's matrices are kept and given again for equal poses.
+        """
+        poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
+        last = self._last_skinning
+        if (root_anchor is None and last is not None and last[0].shape == poses.shape
+                and np.array_equal(last[0], poses)):
+            return last[1]
+        M = self.pose_matrices(poses, root_anchor) @ self.skeleton.inv_rest
+        M.flags.writeable = False
+        if root_anchor is None:
+            self._last_skinning = (poses.copy(), M)
+        return M
 
     def joint_positions(self, poses, root_anchor=None):
         """(P,B,3) world position of every bone's head."""
@@ -237,7 +263,22 @@ class Body:
         if vertices is None:
             vertices, weights, unweighted = self.vertices, self.weights, self.unweighted
         M = self.skinning_matrices(poses, root_anchor)  # (P,B,4,4)
-        return blend_vertices(M, vertices, weights, unweighted, self.skeleton.armature_matrix)
+        return _fast_blend()(M, vertices, weights, unweighted, self.skeleton.armature_matrix)
+
+
+def _fast_blend():
+    """The numba skinning (core/fast_skinning.py) when numba is there, else the NumPy reference below."""
+    global _BLEND
+    if _BLEND is None:
+        try:
+            from .fast_skinning import blend_vertices as fast
+        except ImportError:
+            fast = blend_vertices
+        _BLEND = fast
+    return _BLEND
+
+
+_BLEND = None
 
 
 def blend_vertices(skin_matrices, vertices, weights, unweighted, armature_matrix):

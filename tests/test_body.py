@@ -73,6 +73,37 @@ def test_batch_equals_single_calls(subject):
     assert np.allclose(batch, single, atol=1e-12)
 
 
+def test_local_bases_equal_the_product_of_each_dof_rotation(subject):
+    # local_bases makes every DOF rotation in one batched call; the reference multiplies them bone by bone.
+    from markerless_mocap.core.rotations import axis_angle_matrix
+
+    _, _, body = subject
+    poses = random_poses(body, np.random.default_rng(3), 7)
+    reference = np.broadcast_to(np.eye(4), (7, body.skeleton.n_bones, 4, 4)).copy()
+    for b, dofs in enumerate(body.bone_dofs):
+        for i, axis, share in dofs:
+            reference[:, b, :3, :3] = reference[:, b, :3, :3] @ axis_angle_matrix(axis, poses[:, i] * share)
+    reference[:, body.root_bone] = body._root_basis(poses, None)
+    np.testing.assert_allclose(body.local_bases(poses), reference, rtol=0, atol=1e-15)
+
+
+def test_numba_skinning_equals_the_numpy_reference(subject):
+    from markerless_mocap.core.body import blend_vertices
+    from markerless_mocap.core.fast_skinning import blend_vertices as fast_blend
+
+    _, _, body = subject
+    proxy = make_proxy(body, 2000)
+    M = body.skinning_matrices(random_poses(body, np.random.default_rng(4), 9))
+    for verts, weights, unweighted in [(body.vertices, body.weights, body.unweighted),
+                                       (proxy.vertices, proxy.weights, proxy.unweighted)]:
+        unweighted = unweighted.copy()
+        unweighted[::97] = True  # vertices no bone moves stay put, in both
+        weights = np.where(unweighted[:, None], 0.0, weights)
+        ref = blend_vertices(M, verts, weights, unweighted, body.skeleton.armature_matrix)
+        np.testing.assert_allclose(fast_blend(M, verts, weights, unweighted, body.skeleton.armature_matrix), ref,
+                                   rtol=0, atol=1e-12)
+
+
 def test_keyed_pose_reads_back_same_joints(subject):
     arm, _, body = subject
     bridge = _bridge()

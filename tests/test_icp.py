@@ -6,6 +6,7 @@ of all bone heads to the true ones.
 """
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from markerless_mocap.core.camera import Camera
 from markerless_mocap.core.optimizers import make_optimizer
@@ -158,6 +159,26 @@ def test_depth_buffer_silhouette_agrees_with_reference_rasteriser(subject):
         assert (ref != sil).sum() <= 0.002 * sil.sum()
 
 
+def test_numba_coverage_equals_the_numpy_one(subject):
+    from markerless_mocap.core.render.fast import coverage as fast_coverage
+    from markerless_mocap.core.render.rim import coverage
+
+    body, proxy, _, x_true, cams, _ = subject
+    verts = proxy.deform(body, x_true[None])[0]
+    for cam in cams:
+        uv, z = cam.project_with_depth(verts)
+        ref = coverage(uv, z, proxy.faces, cam.width, cam.height)
+        assert ref.sum() > 500
+        np.testing.assert_array_equal(fast_coverage(uv, z, proxy.faces, cam.width, cam.height), ref)
+    # Triangles off the image, behind the camera, degenerate, with NaN corners: the same rules.
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(-20, 50, (40, 2))
+    uv[3] = np.nan
+    z = rng.uniform(-0.5, 3.0, 40)
+    faces = rng.integers(0, 40, (60, 3))
+    np.testing.assert_array_equal(fast_coverage(uv, z, faces, 30, 24), coverage(uv, z, faces, 30, 24))
+
+
 def test_rim_of_a_sphere_is_its_contour_generator():
     centre, radius = np.array([0.1, 0.0, 0.2]), 0.5
     verts, faces = uv_sphere(centre, radius)
@@ -216,7 +237,7 @@ def test_contour_field_of_a_disc():
     fld = ContourField.from_silhouette(sil)
     assert fld.n_contour > 100
     for y, x in [(40, 5), (40, 75), (3, 40), (70, 70), (40, 40), (45, 38), (50, 52), (25, 30)]:
-        p = fld.nearest[y, x]
+        (p,), (normal,) = fld.lookup(np.array([y]), np.array([x]))
         radial = np.array([x - 40.0, y - 40.0])
         r = np.linalg.norm(radial)
         assert abs(np.linalg.norm(p - 40.0) - 20.5) < 1.0  # on the outline
@@ -225,7 +246,44 @@ def test_contour_field_of_a_disc():
         if r > 25 or 3 < r < 15:  # away from the centre the closest point is radial
             radial /= r
             assert np.linalg.norm(p - 40.0 - 20.5 * radial) < (1.5 if r > 25 else 4.0)
-            assert fld.normal[y, x] @ radial > 0.9
+            assert normal @ radial > 0.9
+
+
+def _dense_contour_field(sil, smoothing=1.0):
+    """The reference: nearest contour pixel of every pixel by the exact Euclidean feature transform of the
+    whole image, normals from the whole image's smoothed mask."""
+    contour = sil & ~ndimage.binary_erosion(sil, border_value=1)
+    gy, gx = np.gradient(ndimage.gaussian_filter(sil.astype(np.float64), smoothing))
+    g = np.stack([-gx, -gy], axis=-1)
+    length = np.linalg.norm(g, axis=-1, keepdims=True)
+    g = np.divide(g, length, out=np.zeros_like(g), where=length > 1e-12)
+    _, (iy, ix) = ndimage.distance_transform_edt(~contour, return_indices=True)
+    normal = g[iy, ix]
+    return np.stack([ix, iy], axis=-1) + 0.5 * normal, normal
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_contour_lookup_matches_the_whole_image_transform(seed):
+    # Blobs touching the image border too: the box the normals are smoothed on must give the same normals.
+    rng = np.random.default_rng(seed)
+    H, W = 90, 120
+    smooth = ndimage.gaussian_filter(rng.random((H, W)), 6)
+    sil = smooth > np.quantile(smooth, 0.6 + 0.1 * seed)
+    sil[:, :3] |= sil[:, 3:4]
+    assert sil.any() and not sil.all()
+    fld = ContourField.from_silhouette(sil)
+    ref_nearest, ref_normal = _dense_contour_field(sil)
+    rows, cols = np.mgrid[0:H, 0:W].reshape(2, -1)
+    nearest, normal = fld.lookup(rows, cols)
+    query = np.stack([cols, rows], axis=-1)
+    # Equally near contour pixels may differ where the distances tie; the distances themselves may not.
+    d_ref = np.linalg.norm(ref_nearest.reshape(-1, 2) - 0.5 * ref_normal.reshape(-1, 2) - query, axis=1)
+    d_new = np.linalg.norm(nearest - 0.5 * normal - query, axis=1)
+    np.testing.assert_allclose(d_new, d_ref, atol=1e-9)
+    same = np.all(np.isclose(nearest - 0.5 * normal, ref_nearest.reshape(-1, 2) - 0.5 * ref_normal.reshape(-1, 2)),
+                  axis=1)
+    assert same.mean() > 0.9
+    np.testing.assert_allclose(normal[same], ref_normal.reshape(-1, 2)[same], atol=1e-12)
 
 
 # ---------------------------------------------------------------- derivatives

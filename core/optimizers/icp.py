@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from ..camera import Camera
 from ..render.rim import MeshEdges, rim_vertices
@@ -97,34 +98,49 @@ class IcpProblem:
 
 @dataclass
 class ContourField:
-    """Nearest observed-contour point and its outward normal for every pixel of one view."""
+    """The observed contour of one view: its points (half a pixel outside the contour pixels) and outward
+    normals, with a k-d tree for the nearest one to any pixel.
 
-    nearest: np.ndarray  # (H,W,2) x, y of the closest contour point (half a pixel outside the contour pixel)
-    normal: np.ndarray  # (H,W,2) outward unit normal at that contour point
+    Only the pixels ICP asks about are looked up (a few hundred rim points per view), so nothing is
+    computed for the whole image: the smoothing that gives the normals runs on the silhouette's box.
+    """
+
+    points: np.ndarray  # (N,2) x, y of the contour pixels
+    normals: np.ndarray  # (N,2) outward unit normal at each
+    tree: object | None
     n_contour: int
 
     @classmethod
     def from_silhouette(cls, silhouette, smoothing: float = 1.0) -> "ContourField":
         sil = np.asarray(silhouette, dtype=bool)
-        # Contour: silhouette pixels with a background 4-neighbour (the image border does not count).
-        contour = sil & ~ndimage.binary_erosion(sil, border_value=1)
+        rows, cols = np.nonzero(np.any(sil, axis=1)), np.nonzero(np.any(sil, axis=0))
+        if len(rows[0]) == 0:
+            return cls(np.zeros((0, 2)), np.zeros((0, 2)), None, 0)
+        # The box with a ring wide enough that the Gaussian (radius 4 sigma) and the gradient see only
+        # zeros beyond it: the result equals the full image's.
         H, W = sil.shape
-        n = int(contour.sum())
-        nearest = np.full((H, W, 2), np.nan)
-        normal = np.zeros((H, W, 2))
-        if n == 0:
-            return cls(nearest, normal, 0)
+        ring = int(4.0 * smoothing + 0.5) + 2
+        y0, y1 = max(rows[0][0] - ring, 0), min(rows[0][-1] + ring + 1, H)
+        x0, x1 = max(cols[0][0] - ring, 0), min(cols[0][-1] + ring + 1, W)
+        box = sil[y0:y1, x0:x1]
+        # Contour: silhouette pixels with a background 4-neighbour (the image border does not count).
+        contour = box & ~ndimage.binary_erosion(box, border_value=1)
+        cy, cx = np.nonzero(contour)
         # Outward normal = minus the gradient of the smoothed mask.
-        smooth = ndimage.gaussian_filter(sil.astype(np.float64), smoothing)
+        smooth = ndimage.gaussian_filter(box.astype(np.float64), smoothing)
         gy, gx = np.gradient(smooth)
-        g = np.stack([-gx, -gy], axis=-1)
+        g = np.stack([-gx[cy, cx], -gy[cy, cx]], axis=-1)
         length = np.linalg.norm(g, axis=-1, keepdims=True)
         g = np.divide(g, length, out=np.zeros_like(g), where=length > 1e-12)
-        _, (iy, ix) = ndimage.distance_transform_edt(~contour, return_indices=True)
-        normal = g[iy, ix]
-        # The true outline runs about half a pixel outside the centres of the contour pixels.
-        nearest = np.stack([ix, iy], axis=-1).astype(np.float64) + 0.5 * normal
-        return cls(nearest, normal, n)
+        points = np.stack([cx + x0, cy + y0], axis=-1).astype(np.float64)
+        return cls(points, g, cKDTree(points), len(points))
+
+    def lookup(self, rows, cols):
+        """Nearest contour point (x, y; the true outline runs about half a pixel outside the contour
+        pixel's centre) and its outward normal for each pixel (rows[i], cols[i]): (n,2), (n,2)."""
+        _, index = self.tree.query(np.stack([cols, rows], axis=-1).astype(np.float64))
+        normal = self.normals[index]
+        return self.points[index] + 0.5 * normal, normal
 
 
 # ---------------------------------------------------------------- derivatives
@@ -235,7 +251,7 @@ def find_correspondences(vertices, proxy_faces, edges, cameras, fields, d_max, c
             continue
         col = np.rint(rim.uv[:, 0]).astype(np.int64)
         row = np.rint(rim.uv[:, 1]).astype(np.int64)
-        p, n = fld.nearest[row, col], fld.normal[row, col]
+        p, n = fld.lookup(row, col)
         ok = np.linalg.norm(rim.uv - p, axis=1) <= d_max
         ok &= np.einsum("ni,ni->n", rim.normal, n) >= cos_min
         views.append(np.full(int(ok.sum()), v))

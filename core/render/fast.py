@@ -15,47 +15,15 @@ Per task (one pose in one view) a worker reuses its own label / 1/z / chamfer bu
 """
 from __future__ import annotations
 
-import os
-import re
-
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from ..jit import jit
 from .reference import (BOUNDARY, BOUNDARY_OFF, MAX_COORD_PX, N_BINS, N_STATS, OVERLAP, SUBPIXEL, SUM_DI, SUM_DT,
                         SUM_EDGE_DT, TEMPLATE, Z_NEAR, FrameTargets, snap)
 
 _BIG = 1 << 28  # 'no template pixel yet' in the int32 chamfer buffer (x3 units: ~90 million px)
-
-
-# ---------------------------------------------------------------------------------------- JIT cache
-# numba's on-disk cache names a compiled function's module inside the cached data. This file is imported
-# as `markerless_mocap.core.render.fast` (CLI, tests) and as `bl_ext.<repo>.markerless_mocap...` (Blender),
-# and one process cannot load what the other cached (ModuleNotFoundError). So each importing module name
-# gets its own cache folder (numba's own locators with one more path component).
-def _module_keyed(base):
-    class ModuleKeyedLocator(base):
-        def __init__(self, py_func, py_file):
-            super().__init__(py_func, py_file)
-            tag = re.sub(r"[^A-Za-z0-9_.-]", "_", py_func.__module__)
-            self._cache_path = os.path.join(self._cache_path, f"numba-{tag}")
-
-    ModuleKeyedLocator.__name__ = f"ModuleKeyed{base.__name__}"
-    return ModuleKeyedLocator
-
-
-try:
-    from numba.core import caching as _caching
-
-    class _ModuleKeyedImpl(_caching.CompileResultCacheImpl):
-        _locator_classes = [_module_keyed(c) for c in (_caching.UserProvidedCacheLocator,
-                                                       _caching.InTreeCacheLocator,
-                                                       _caching.UserWideCacheLocator)]
-
-    class _ModuleKeyedCache(_caching.FunctionCache):
-        _impl_class = _ModuleKeyedImpl
-except (ImportError, AttributeError):  # a numba without these internals: its default cache
-    _ModuleKeyedCache = None
 
 
 def _chunks_one_at_a_time():
@@ -66,23 +34,7 @@ def _chunks_one_at_a_time():
     return chunksize(1) if chunksize is not None else contextlib.nullcontext()
 
 
-def _jit(**options):
-    """njit with the module-keyed disk cache (numba's default cache if that cannot be set up)."""
-    def wrap(fn):
-        dispatcher = njit(cache=False, **options)(fn)
-        try:
-            dispatcher._cache = _ModuleKeyedCache(dispatcher.py_func)
-        except Exception:  # noqa: BLE001  (changed numba internals, or no usable cache folder)
-            try:
-                dispatcher.enable_caching()
-            except Exception:  # noqa: BLE001  (nowhere to cache: compile in every session)
-                pass
-        return dispatcher
-    return wrap
-
-
-
-@_jit()
+@jit()
 def _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi):
     """Draw one mesh (vertices snapped to 1/SUBPIXEL px, `q`; iz = 0 marks unusable vertices) into
     labels/zbuf (zero over the template box); widen each row's span to cover what it draws."""
@@ -141,7 +93,7 @@ def _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_h
                 row_hi[y] = x1
 
 
-@_jit()
+@jit()
 def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt, cap_units):
     """Sum over observed pixels of the 3-4 chamfer distance (pixels) to the template, each capped at
     cap_units / 3 pixels.
@@ -171,7 +123,7 @@ def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt, cap_un
     return total / 3.0
 
 
-@_jit()
+@jit()
 def _one_task(q, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_dt, ab_bins, obox,
               need_chamfer, cap_units, need_color, labels, zbuf, dt, row_lo, row_hi, stats_out, hist_out):
     # Template box: the pixel centres the usable vertices span (every drawn pixel lies inside).
@@ -234,7 +186,7 @@ def _one_task(q, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_
                                           cap_units)
 
 
-@_jit(parallel=True)
+@jit(parallel=True)
 def _statistics_kernel(q, iz, faces, face_label, cull, widths, heights, sil, sil_dt, edge_off, edge_dt, ab_bins,
                        obox, need_chamfer, cap_units, need_color, n_chunks, stats, hist):
     P, C = q.shape[0], q.shape[1]
@@ -266,7 +218,7 @@ def statistics(uv, z, faces, face_label, targets: FrameTargets, need_chamfer=Tru
 
 
 # ---------------------------------------------------------------------------------------- projection
-@_jit(parallel=True)
+@jit(parallel=True)
 def _project_kernel(vertices, R, t, K, dist, has_dist, q, iz):
     P, V = vertices.shape[0], vertices.shape[1]
     C = R.shape[0]
@@ -348,3 +300,42 @@ def statistics_from_snapped(q, iz, faces, face_label, targets: FrameTargets, nee
     if not n_parts:
         hist = hist[:, :, :0]
     return stats, hist
+
+
+# ---------------------------------------------------------------------------------------- coverage
+@jit()
+def _coverage_kernel(uv, z, faces, width, height, z_near, mask):
+    for f in range(faces.shape[0]):
+        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+        if min(z[ia], min(z[ib], z[ic])) <= z_near:
+            continue
+        ax, ay, bx, by, cx, cy = uv[ia, 0], uv[ia, 1], uv[ib, 0], uv[ib, 1], uv[ic, 0], uv[ic, 1]
+        area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        if area == 0 or not np.isfinite(area):
+            continue
+        # The box of rim._pixel_samples: clipped to [-1, size] first, then to the image.
+        x0 = max(int(np.ceil(min(max(min(ax, min(bx, cx)), -1.0), width))), 0)
+        x1 = min(int(np.floor(min(max(max(ax, max(bx, cx)), -1.0), width))), width - 1)
+        y0 = max(int(np.ceil(min(max(min(ay, min(by, cy)), -1.0), height))), 0)
+        y1 = min(int(np.floor(min(max(max(ay, max(by, cy)), -1.0), height))), height - 1)
+        s = 1.0 / area
+        for y in range(y0, y1 + 1):
+            fy = float(y)
+            for x in range(x0, x1 + 1):
+                if mask[y, x]:
+                    continue
+                fx = float(x)
+                wa = ((bx - fx) * (cy - fy) - (by - fy) * (cx - fx)) * s
+                wb = ((cx - fx) * (ay - fy) - (cy - fy) * (ax - fx)) * s
+                wc = 1.0 - wa - wb
+                if wa >= 0 and wb >= 0 and wc >= 0:
+                    mask[y, x] = True
+
+
+def coverage(uv, z, faces, width, height):
+    """rim.coverage (pixel centres inside any triangle in front of Z_NEAR, either winding) with the same
+    floating-point tests, triangle by triangle instead of all candidate pixels at once."""
+    mask = np.zeros((height, width), dtype=np.bool_)
+    _coverage_kernel(np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(z, dtype=np.float64),
+                     np.ascontiguousarray(faces, dtype=np.int64), int(width), int(height), float(Z_NEAR), mask)
+    return mask

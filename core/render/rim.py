@@ -135,6 +135,27 @@ def coverage(uv, z, faces, width, height) -> np.ndarray:
     return mask.reshape(height, width)
 
 
+def _coverage(uv, z, faces, width, height):
+    """`coverage`, by the numba kernel when numba is there (render/fast.py; the same tests)."""
+    try:
+        from .fast import coverage as fast_coverage
+    except ImportError:
+        return coverage(uv, z, faces, width, height)
+    return fast_coverage(uv, z, faces, width, height)
+
+
+def _window_any(image, radius, row, col):
+    """Whether `image` is set anywhere in the (2r+1)^2 window around each (row, col), edge-padded:
+    `_window_extreme(image, radius, np.logical_or)[row, col]` without the whole image."""
+    H, W = image.shape
+    out = np.zeros(len(row), dtype=bool)
+    for dy in range(-radius, radius + 1):
+        rows = np.clip(row + dy, 0, H - 1)
+        for dx in range(-radius, radius + 1):
+            out |= image[rows, np.clip(col + dx, 0, W - 1)]
+    return out
+
+
 def _window_extreme(image, radius, reduce):
     """Max or min of `image` over the (2r+1)^2 window around every pixel (edge-padded)."""
     padded = np.pad(image, radius, mode="edge")
@@ -183,7 +204,7 @@ def rim_vertices(vertices, faces, camera, edges: MeshEdges | None = None, *, dep
     W, H = camera.width, camera.height
     uv, z = camera.project_with_depth(vertices)
     if depth is None:  # the outer outline needs only the coverage, which is cheaper
-        depth = np.where(coverage(uv, z, faces, W, H), 0.0, np.inf) if outer_only else depth_buffer(uv, z, faces, W, H)
+        depth = np.where(_coverage(uv, z, faces, W, H), 0.0, np.inf) if outer_only else depth_buffer(uv, z, faces, W, H)
     rim, front = rim_edges(vertices, faces, edges, camera.center)
 
     # Outward normals: perpendicular of each rim edge, pointing away from its front triangle's third corner.
@@ -205,7 +226,7 @@ def rim_vertices(vertices, faces, camera, edges: MeshEdges | None = None, *, dep
     keep = (z[ids] > Z_NEAR) & (norm > 0) & (col >= 0) & (col < W) & (row >= 0) & (row < H)
     ids, norm, u, col, row = ids[keep], norm[keep], u[keep], col[keep].astype(np.int64), row[keep].astype(np.int64)
     background = np.isinf(depth)
-    open_sky = _window_extreme(background, window, np.logical_or)[row, col]
+    open_sky = _window_any(background, window, row, col)
     if outer_only:
         visible = open_sky
     else:
