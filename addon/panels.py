@@ -101,6 +101,7 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         settings.enabled = not props.is_tracking
         settings.prop(props, "algorithm")
         settings.prop(props, "likelihood")
+        settings.prop(props, "preset")
         col = settings.column(align=True)
         col.prop(props, "particles")
         col.prop(props, "iterations")

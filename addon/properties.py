@@ -32,6 +32,21 @@ LIKELIHOODS = (
     ("kp", "Keypoints", "Learned 2D body keypoints only (with the anatomical prior)"),
 )
 
+PRESETS = (
+    ("full", "Full", "The paper's budget (200 particles x 15 iterations) and the local fit on finer silhouettes"),
+    ("preview", "Preview", "A quick look at a take: 50 particles x 4 iterations and the local fit at the search's "
+                           "resolution, several times faster (README, 'Speed')"),
+)
+
+
+def _apply_preset(props, context):
+    """Show the preset's search budget in the Particles / Iterations fields (they stay editable)."""
+    from ..core.tracking import TrackingSettings
+
+    settings = TrackingSettings.preset(props.preset)
+    props.particles, props.iterations = settings.particles, settings.iterations
+
+
 BACKENDS = (
     ("auto", "Auto", "The GPU (GLSL) on a hardware GPU, else the fast compiled CPU path, else NumPy; "
                      "the GPU is probed in a separate process first"),
@@ -87,6 +102,8 @@ class MocapSettings(bpy.types.PropertyGroup):
     algorithm: EnumProperty(name="Algorithm", items=ALGORITHMS, default="isa")
     likelihood: EnumProperty(name="Likelihood", items=LIKELIHOODS, default="lsilh+edge+kp",
                              description="Image cues the pose is scored against")
+    preset: EnumProperty(name="Preset", items=PRESETS, default="full", update=_apply_preset,
+                         description="Speed against accuracy: Full for the final take, Preview for a quick look")
     particles: IntProperty(name="Particles", default=200, min=1, soft_max=2000,
                            description="Pose hypotheses per iteration (the budget per frame is particles x iterations)")
     iterations: IntProperty(name="Iterations", default=15, min=1, soft_max=100,
@@ -133,9 +150,9 @@ class MocapSettings(bpy.types.PropertyGroup):
     def tracking_settings(self):
         from ..core.tracking import TrackingSettings
 
-        return TrackingSettings(algorithm=self.algorithm, likelihood=self.likelihood, particles=self.particles,
-                                iterations=self.iterations, seed=self.seed, backend=self.backend,
-                                refine="icp" if self.refine else "none")
+        return TrackingSettings.preset(self.preset, algorithm=self.algorithm, likelihood=self.likelihood,
+                                       particles=self.particles, iterations=self.iterations, seed=self.seed,
+                                       backend=self.backend, refine="icp" if self.refine else "none")
 
 
 classes = (MocapSettings,)

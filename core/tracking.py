@@ -106,14 +106,34 @@ class TrackingSettings:
     # person's joints span about likelihood.REFINE_PERSON_PX pixels (at most the footage's), from the
     # person's size in the views as the energy resolution is.
     refine_scale: float | None = None
+    # False: the local fit on the search's own silhouettes (refine_scale = the energy scale; the preview preset).
+    fine_refine: bool = True
     optimizer_options: dict = field(default_factory=dict)
 
     @property
     def budget(self):
         return self.particles * self.iterations
 
+    @classmethod
+    def preset(cls, name, **overrides):
+        """Settings of a named preset (PRESETS), then `overrides` (None values ignored)."""
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r}; presets are {sorted(PRESETS)}")
+        values = {**PRESETS[name], **{k: v for k, v in overrides.items() if v is not None}}
+        return cls(**values)
+
     def to_dict(self):
         return asdict(self)
+
+
+# Named settings. "full": the paper's budget with the local fit on finer silhouettes (the default).
+# "preview": for a quick look at a take, a sixtieth of the search (50 particles x 4 iterations) and the local
+# fit at the search's resolution; the landmarks and the local fit do most of the work there (README,
+# "Speed": its seconds per frame and accuracy on every sample scene).
+PRESETS = {
+    "full": {},
+    "preview": {"particles": 50, "iterations": 4, "fine_refine": False},
+}
 
 
 @dataclass
@@ -151,8 +171,9 @@ class Tracker:
         self.scale = self.energy.scale
         self.refine_scale = self.settings.refine_scale
         if self.refine_scale is None:
-            self.refine_scale = max(self.scale, energy_scale_for(body, capture.cameras, body.default_pose(),
-                                                                 person_px=REFINE_PERSON_PX, largest=1.0))
+            self.refine_scale = self.scale if not self.settings.fine_refine else max(
+                self.scale, energy_scale_for(body, capture.cameras, body.default_pose(), person_px=REFINE_PERSON_PX,
+                                             largest=1.0))
         self.fine_silhouettes = None
         self.dynamics = dynamics
         if self.settings.refine not in ("icp", "none"):

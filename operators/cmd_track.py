@@ -4,7 +4,7 @@ import time
 from pathlib import Path
 
 from ..core.likelihood import LIKELIHOODS
-from ..core.tracking import TrackingSettings
+from ..core.tracking import PRESETS, TrackingSettings
 
 ALGORITHMS = ("isa", "apf", "pf", "fsa", "icp")
 LIKELIHOOD_NAMES = tuple(LIKELIHOODS)
@@ -29,8 +29,13 @@ def add_tracking_options(p):
     p.add_argument("--likelihood", choices=LIKELIHOOD_NAMES, default=TrackingSettings.likelihood,
                    help=f"energy terms (default: {TrackingSettings.likelihood}; 'l' = the learned person mask, "
                         "'kp' = learned 2D keypoints)")
-    p.add_argument("--particles", type=int, default=200, help="particles (ISA/APF); budget = particles x iterations")
-    p.add_argument("--iterations", type=int, default=15, help="annealing iterations/layers per frame")
+    p.add_argument("--preset", choices=tuple(PRESETS), default="full",
+                   help="full: the paper's budget, 200 x 15, and the local fit on finer silhouettes (default); "
+                        "preview: 50 x 4 and the local fit at the search's resolution, several times faster")
+    p.add_argument("--particles", type=int, default=None,
+                   help="particles (ISA/APF); budget = particles x iterations (default: the preset's, 200)")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="annealing iterations/layers per frame (default: the preset's, 15)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--refine", choices=("icp", "none"), default="icp",
                    help="local fit of the silhouette outlines after the search (default: icp; none = plain optimiser)")
@@ -43,10 +48,9 @@ def add_tracking_options(p):
 
 def settings_from_args(args, backend=None):
     """TrackingSettings from the command line; `backend`: the resolved backend (else the one asked for)."""
-    return TrackingSettings(algorithm=args.algorithm, likelihood=args.likelihood, particles=args.particles,
-                            iterations=args.iterations, seed=args.seed, backend=backend or args.backend,
-                            background=args.background,
-                            refine=args.refine)
+    return TrackingSettings.preset(args.preset, algorithm=args.algorithm, likelihood=args.likelihood,
+                                   particles=args.particles, iterations=args.iterations, seed=args.seed,
+                                   backend=backend or args.backend, background=args.background, refine=args.refine)
 
 
 def add_arguments(p):

@@ -185,7 +185,7 @@ def test_panels_draw_settings_state_and_buttons(addon_module_name, bpy_module):
     bpy = bpy_module
     log = _draw_all(bpy)
     props = {entry[1] for entry in log if entry[0] == "prop"}
-    assert {"capture_dir", "units", "armature", "algorithm", "likelihood", "particles", "iterations", "seed",
+    assert {"capture_dir", "units", "armature", "algorithm", "likelihood", "preset", "particles", "iterations", "seed",
             "backend", "use_frame_range", "frame_start", "frame_end", "output_dir"} <= props
     ops = {entry[1] for entry in log if entry[0] == "operator"}
     assert ops == {"mocap.import_capture", "mocap.check_subject", "mocap.track", "mocap.export_fbx",
@@ -358,8 +358,21 @@ def test_track_execute_keys_every_frame_and_finishes(fake_track):
     assert m.last_output == str(tmp_path / "out") and m.last_error == ""
     assert m.seconds_per_frame == pytest.approx(0.01)
     assert m.backend_used.startswith("numpy (")  # the Track panel shows which backend ran, and why
+    assert s.fine_refine  # the full preset's local fit on finer silhouettes
     labels = [entry[1] for entry in _draw_all(bpy) if entry[0] == "label"]
     assert any(t.startswith("Using: numpy") for t in labels)
+
+
+def test_preview_preset_sets_the_budget_and_the_local_fit_resolution(fake_track):
+    bpy = fake_track[0]
+    m = bpy.context.scene.mocap
+    m.preset = "preview"
+    assert (m.particles, m.iterations) == (50, 4)  # shown in the panel, still editable
+    m.iterations = 6
+    s = m.tracking_settings()
+    assert (s.particles, s.iterations, s.fine_refine) == (50, 6, False)
+    m.preset = "full"
+    assert (m.particles, m.iterations, m.tracking_settings().fine_refine) == (200, 15, True)
 
 
 def test_track_with_gpu_asked_for_and_no_gpu_names_the_fix(fake_track, monkeypatch, addon_module_name):
