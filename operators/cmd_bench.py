@@ -12,7 +12,8 @@ the local fit; `lsilh+edge+kp`) tracked from the ground truth's pose on --pipeli
 capture; ratios against the NumPy reference.
 Ends with one JSON line: reference_s, fast_s, ratio, fk_lbs_s, diffusion_vga_s, poses, views, resolution, backend,
 ..., and per backend `numpy`, `fast`, `gpu` ({evaluations_per_s, likelihood_s_per_frame, pipeline_s_per_frame,
-*_vs_numpy}), `auto_backend` and `default_s_per_frame` (the default pipeline on the backend auto picks).
+*_vs_numpy}), `auto_backend`, `default_s_per_frame` (the default pipeline on the backend auto picks) and
+`preview_s_per_frame` (the preview preset's pipeline on that backend).
 """
 import json
 import os
@@ -165,9 +166,10 @@ def _gpu_available():
         return False, str(exc)
 
 
-def _pipeline_seconds(body, capture_dir, backend, n_frames, particles, iterations):
+def _pipeline_seconds(body, capture_dir, backend, n_frames, particles, iterations, preset="full"):
     """Seconds per frame of the default pipeline (TrackingSettings defaults: lsilh+edge+kp, ISA, the local
-    fit) on `backend`, tracked from the ground truth's pose at frame 0 over frames 1..n_frames."""
+    fit; or another preset's, its own budget where particles/iterations are None) on `backend`, tracked from
+    the ground truth's pose at frame 0 over frames 1..n_frames."""
     from ..core.capture.capture import load_capture
     from ..core.tracking import Tracker, TrackingSettings
     from .cmd_compare import true_first_pose
@@ -176,7 +178,7 @@ def _pipeline_seconds(body, capture_dir, backend, n_frames, particles, iteration
     capture = load_capture(capture_dir)
     try:
         prior, dynamics = build_motion_models(body, capture_dir, capture.frames.fps)
-        settings = TrackingSettings(backend=backend, particles=particles, iterations=iterations)
+        settings = TrackingSettings.preset(preset, backend=backend, particles=particles, iterations=iterations)
         tracker = Tracker(body, capture, settings, prior=prior, dynamics=dynamics)
         tracker.initialise(0, initial_pose=true_first_pose(body, Path(capture_dir) / "gt_joints.npz", 0))
         seconds, evaluations = [], []
@@ -343,7 +345,14 @@ def run(args):
     if default is not None:
         print(f"default pipeline at the paper's budget on the backend auto picks ({auto_backend}): "
               f"{default:.2f} s per frame")
+    preview = None
+    if default is not None:
+        preview, evals, settings = _pipeline_seconds(body, args.capture, auto_backend, args.pipeline_frames, None,
+                                                     None, preset="preview")
+        print(f"preview preset ({settings.particles} x {settings.iterations}, the local fit at the search's "
+              f"resolution) on {auto_backend}: {preview:.2f} s per frame")
     print(json.dumps({**table, "auto_backend": auto_backend, "default_s_per_frame": default,
+                      "preview_s_per_frame": None if preview is None else round(preview, 3),
                       "load_average": [round(x, 2) for x in os.getloadavg()],
                       "learned_evidence_s": round(learned, 4), "reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
                       "fk_lbs_s": round(fk, 4), "diffusion_vga_s": round(diffusion, 4), "fast_cpu_s": round(fast_cpu, 4), "poses": args.poses, "views": len(cameras),
