@@ -25,6 +25,7 @@ from .proxy import make_proxy
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
 from .view_presence import views_in_play
 
+NEXT = object()  # Tracker.track's default next frame: the one after
 REANCHOR_ANGLE = np.deg2rad(20.0)
 # First frame from keypoints: the global search then only needs to look this far around the fitted pose.
 KEYPOINT_INIT_TRANSLATION = 0.08  # metres, half width
@@ -108,6 +109,9 @@ class TrackingSettings:
     refine_scale: float | None = None
     # False: the local fit on the search's own silhouettes (refine_scale = the energy scale; the preview preset).
     fine_refine: bool = True
+    # Observe frame t+1 (read, learned evidence, features) in a worker thread during frame t's local fit;
+    # the same result either way.
+    prefetch: bool = True
     optimizer_options: dict = field(default_factory=dict)
 
     @property
@@ -192,6 +196,9 @@ class Tracker:
         self.views_left_out = {}  # {frame: [camera names]} left out of the image terms that frame
         self.proposals = []
         self.history = []  # relative poses of the solved frames (most recent last)
+        self.next_guide = None  # (frame, absolute poses) the next frame's crops are placed around
+        self._pool = None  # the prefetch worker
+        self._prefetched = None  # (frame, guide, future)
         self.estimates = []
 
     # ------------------------------------------------------------------ set-up
@@ -238,26 +245,78 @@ class Tracker:
         """The frame's ViewFeatures per camera; with learned evidence, also sets self.evidence (one
         ViewEvidence per camera, the model's crops placed around `guide_poses`: the poses the person is
         expected near, absolute)."""
-        images = self.capture.frames.read(frame)
-        cams = self.capture.cameras
         if guide_poses is None:
             guide_poses = self._guide_poses()
+        return self._use(self._observe_frame(frame, guide_poses))
+
+    def _use(self, observation):
+        feats, self.evidence, self.fine_silhouettes = observation
+        return feats
+
+    def _observe_frame(self, frame, guide_poses):
+        """(features, evidence, fine silhouettes) of `frame`, reading nothing of the tracker's state but the
+        capture, the background models and the landmark model: it may run in the prefetch thread."""
+        images = self.capture.frames.read(frame)
+        cams = self.capture.cameras
         masks = [None] * len(cams)
-        self.evidence = None
+        evidence = None
         if self.energy.weights.needs_learned_evidence:
-            self.evidence = self.observe(images, guide_poses)
+            evidence = self.observe(images, guide_poses)
             if self.energy.weights.mask == "learned":
-                masks = [ev.mask if ev.found else None for ev in self.evidence]
+                masks = [ev.mask if ev.found else None for ev in evidence]
         masks = [self.backgrounds[cam.name].silhouette(images[cam.name]) if mask is None else mask
                  for cam, mask in zip(cams, masks)]
-        self.fine_silhouettes = None
+        fine = None
         if self.refines and self.refine_scale != self.scale:
-            self.fine_silhouettes = [resize_mask(check_mask(mask), feature_size(images[cam.name].shape,
-                                                                                self.refine_scale))
-                                     for cam, mask in zip(cams, masks)]
-        return [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
-                                      diffuse=self.uses_color, silhouette=mask)
-                for cam, mask in zip(cams, masks)]
+            fine = [resize_mask(check_mask(mask), feature_size(images[cam.name].shape, self.refine_scale))
+                    for cam, mask in zip(cams, masks)]
+        feats = [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
+                                       diffuse=self.uses_color, silhouette=mask)
+                 for cam, mask in zip(cams, masks)]
+        return feats, evidence, fine
+
+    # ---- the next frame, observed while this one is finished
+    # The learned evidence (the landmark model: a tenth of a second on both cores) and the features of frame
+    # t+1 need only where the person will be: the crops are placed around the search's estimate of frame t
+    # (before the local fit, which moves it by a centimetre or two within crops 1.35 x the body), so they are
+    # computed in a worker thread while the main thread runs the local fit, which uses one core.
+    def _plan_next(self, frame, searched, observe):
+        """Place the next frame's crops around the search's estimate (and its step from the last frame), and
+        observe that frame in the worker when `observe`. The plan is kept in the tracker's state, so a resumed
+        run places the crops as an uninterrupted one did."""
+        frame = int(frame)
+        last = [self.to_absolute(h) for h in self.history[-1:]] + [self.to_absolute(searched)]
+        guide = np.stack(last) if len(last) == 1 else np.stack([last[1], 2 * last[1] - last[0]])
+        self.next_guide = (frame, guide)
+        if not observe or not 0 <= frame < self.capture.frames.n_frames:
+            return
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mocap-observe")
+        self._prefetched = (frame, guide, self._pool.submit(self._observe_frame, frame, guide))
+
+    def _take_prefetched(self, frame, guide_poses):
+        """The prefetched observation of `frame` around `guide_poses`, or None. Waits for any prefetch still
+        running (the frame reader and the landmark model serve one thread at a time)."""
+        pending, self._prefetched = self._prefetched, None
+        if pending is None:
+            return None
+        p_frame, p_guide, future = pending
+        if p_frame != int(frame) or p_guide is not guide_poses:
+            try:
+                future.result()
+            except Exception:  # noqa: BLE001  (a frame nobody asks for: its error does not matter)
+                pass
+            return None
+        return future.result()
+
+    def finish_prefetch(self):
+        """Wait for a prefetch still running and stop the worker (before the capture is closed)."""
+        self._take_prefetched(-1, None)
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
 
     def observe(self, images, guide_poses):
         """Learned evidence per view, from crops around the projected joints of `guide_poses`."""
@@ -285,8 +344,10 @@ class Tracker:
         """Compute `frame`'s features (and learned evidence, crops around `guide_poses`, by default the
         prediction from the last estimates) and hand them to the energy model; returns the features."""
         if guide_poses is None:
-            guide_poses = self._guide_poses()
-        feats = self.features(frame, guide_poses)
+            planned = self.next_guide
+            guide_poses = planned[1] if planned is not None and planned[0] == int(frame) else self._guide_poses()
+        observation = self._take_prefetched(frame, guide_poses)
+        feats = self._use(observation if observation is not None else self._observe_frame(frame, guide_poses))
         self.energy.set_frame(feats, self.evidence)
         predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
         targets = self.energy.targets
@@ -423,14 +484,17 @@ class Tracker:
                 x[idx] = np.median(prior.samples[group], axis=0)
         return self.body.clamp(x)
 
-    def track(self, frame):
-        """Solve one frame after the initial one."""
+    def track(self, frame, next_frame=NEXT):
+        """Solve one frame after the initial one. `next_frame`: the frame to observe meanwhile (default
+        frame + 1; None when no frame follows)."""
         t0 = time.perf_counter()
         feats = self.load_frame(frame)
         if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
             self.optimizer.set_frame_problem(self._icp_problem(feats))
         result = self.optimizer.track_frame(self._energy_fn, list(self.history))
         estimate, energy, evaluations = result.estimate, result.energy, result.evaluations
+        self._plan_next(frame + 1 if next_frame is NEXT or next_frame is None else next_frame, estimate,
+                        observe=self.settings.prefetch and next_frame is not None)
         if self.refines:
             estimate = self._refine(feats, estimate)
             energy, evaluations = float(self._energy_fn(estimate[None])[0]), evaluations + 1
@@ -562,7 +626,7 @@ class Tracker:
         return {"optimizer": self.optimizer, "anchor": self.anchor, "history": self.history,
                 "color_model": (self.energy.color_model, self.energy.color_count),
                 "reference": (self.energy.reference_area, self.energy.reference_boundary),
-                "limb_off_frames": dict(self.limb_off_frames)}
+                "limb_off_frames": dict(self.limb_off_frames), "next_guide": self.next_guide}
 
     def restore(self, state):
         self.optimizer = state["optimizer"]
@@ -571,17 +635,22 @@ class Tracker:
         self.energy.reference_area, self.energy.reference_boundary = state["reference"]
         self.energy.color_model, self.energy.color_count = state["color_model"]
         self.limb_off_frames = dict(state.get("limb_off_frames", {}))
+        self.next_guide = state.get("next_guide")
 
 
 def run_tracker(tracker, frames, initial_pose=None, rough_pose=None, on_frame=None, should_stop=None):
     """Track `frames` (the first one initialises). Returns the list of FrameEstimates."""
     out = []
-    for i, frame in enumerate(frames):
-        if should_stop is not None and should_stop():
-            break
-        est = tracker.initialise(frame, rough_pose=rough_pose, initial_pose=initial_pose) if i == 0 \
-            else tracker.track(frame)
-        out.append(est)
-        if on_frame is not None:
-            on_frame(est)
+    try:
+        for i, frame in enumerate(frames):
+            if should_stop is not None and should_stop():
+                break
+            upcoming = frames[i + 1] if i + 1 < len(frames) else None
+            est = tracker.initialise(frame, rough_pose=rough_pose, initial_pose=initial_pose) if i == 0 \
+                else tracker.track(frame, next_frame=upcoming)
+            out.append(est)
+            if on_frame is not None:
+                on_frame(est)
+    finally:
+        tracker.finish_prefetch()
     return out

@@ -151,7 +151,7 @@ class TrackSession:
         if not self.writer.estimates:
             est = self.tracker.initialise(frame, rough_pose=self.rough_pose)
         else:
-            est = self.tracker.track(frame)
+            est = self.tracker.track(frame, next_frame=self.frames[0] if self.frames else None)
         if self.tracker.keypoint_fit is not None:
             self.writer.info["first_frame_keypoint_fit"] = self.tracker.keypoint_fit
         if self.tracker.recoveries:
@@ -184,6 +184,8 @@ class TrackSession:
 
     def finish(self, export=True, overlays=True, save_blend=True):
         """Write the result folder's Blender-side files (main thread)."""
+        if self.tracker is not None:
+            self.tracker.finish_prefetch()  # a cancelled run may leave the next frame being observed
         out = self.writer.out
         written = {"joints": out / "joints.npz", "poses": out / "poses.npz", "report": out / "report.json"}
         est = self.writer.estimates

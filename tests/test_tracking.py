@@ -140,6 +140,18 @@ def test_resume_continues_exactly(tmp_path):
     np.testing.assert_array_equal(full["poses"], split["poses"])
 
 
+def test_observing_the_next_frame_in_the_worker_changes_nothing(walk):
+    # The next frame is read and its learned evidence computed in a worker thread during this frame's local
+    # fit; the result must be what the same plan computed in the main thread gives.
+    runs = {}
+    for prefetch in (True, False):
+        tracker = make_tracker(walk, particles=30, iterations=3, seed=1, prefetch=prefetch)
+        ests = run_tracker(tracker, range(0, 5), initial_pose=walk["gt"][0])
+        runs[prefetch] = np.stack([e.pose for e in ests])
+        assert tracker._pool is None and tracker._prefetched is None  # run_tracker stopped the worker
+    np.testing.assert_array_equal(runs[True], runs[False])
+
+
 def test_result_folder_files_all_load(tmp_path):
     import cv2
 

@@ -8,6 +8,7 @@ Each camera keeps a bounded LRU cache of decoded frames.
 from __future__ import annotations
 
 import re
+import threading
 from collections import OrderedDict
 from pathlib import Path
 
@@ -142,6 +143,9 @@ class FrameSource:
                                        "camera later, give the other cameras larger offsets instead)")
             self.offsets[name] = int(off)
         self.cache_size = int(cache_size)
+        # The tracker reads the next frame in a worker thread while it finishes this one: one reader at a time,
+        # and close() waits for a read under way.
+        self._lock = threading.RLock()
         self._readers = {}
         self._caches = {}
         try:
@@ -229,16 +233,17 @@ class FrameSource:
         self._check(frame)
         reader, cache = self._reader(name), self._caches[name]
         index = int(frame) + self.offsets[name]
-        image = cache.get(index)
-        if image is not None:
-            cache.move_to_end(index)
+        with self._lock:
+            image = cache.get(index)
+            if image is not None:
+                cache.move_to_end(index)
+                return image
+            image = reader.read(index)
+            if self.cache_size:
+                cache[index] = image
+                while len(cache) > self.cache_size:
+                    cache.popitem(last=False)
             return image
-        image = reader.read(index)
-        if self.cache_size:
-            cache[index] = image
-            while len(cache) > self.cache_size:
-                cache.popitem(last=False)
-        return image
 
     def read(self, frame: int) -> dict:
         """{camera name: BGR uint8 image} at capture frame `frame` (0-based)."""
@@ -252,8 +257,9 @@ class FrameSource:
             raise IndexError(f"frame {frame} is out of range: the capture has frames 0..{self.n_frames - 1}")
 
     def close(self) -> None:
-        for reader in self._readers.values():
-            reader.close()
+        with self._lock:
+            for reader in self._readers.values():
+                reader.close()
 
     def __enter__(self):
         return self
