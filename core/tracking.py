@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .blas_threads import blas_threads
 from .features import BackgroundModel, compute_view_features
 from .features.mask_cleanup import check_mask
 from .features.view_features import feature_size, resize_mask
@@ -416,6 +417,10 @@ class Tracker:
     # ------------------------------------------------------------------ tracking
     def initialise(self, frame, rough_pose=None, initial_pose=None):
         """First frame: a global ISA search around the subject's rough placement (or a given pose)."""
+        with blas_threads(1):
+            return self._initialise(frame, rough_pose, initial_pose)
+
+    def _initialise(self, frame, rough_pose, initial_pose):
         t0 = time.perf_counter()
         body, s = self.body, self.settings
         rough = body.default_pose() if rough_pose is None else np.asarray(rough_pose, float)
@@ -487,6 +492,10 @@ class Tracker:
     def track(self, frame, next_frame=NEXT):
         """Solve one frame after the initial one. `next_frame`: the frame to observe meanwhile (default
         frame + 1; None when no frame follows)."""
+        with blas_threads(1):  # the cores are the rasteriser's and the worker's (core/blas_threads.py)
+            return self._track(frame, next_frame)
+
+    def _track(self, frame, next_frame):
         t0 = time.perf_counter()
         feats = self.load_frame(frame)
         if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
