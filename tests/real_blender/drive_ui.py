@@ -87,8 +87,11 @@ def step_setup():
     m.capture_dir = str(CAPTURE)
     m.output_dir = str(OUT / "ui_result")
     m.use_frame_range, m.frame_start, m.frame_end = True, 0, 29
+    m.preset = "preview"  # the Preset menu as a user picks it: the budget fields follow it
+    report["preset"] = {"name": m.preset, "budget": [m.particles, m.iterations],
+                        "local_fit_fine": m.tracking_settings().fine_refine}
     m.particles, m.iterations = 30, 4
-    log("sidebar open; capture folder, output folder, frames 0-29, 30 x 4 set")
+    log(f"sidebar open; capture folder, output folder, frames 0-29; preset {report['preset']}, then 30 x 4 set")
     bpy.app.timers.register(step_tab, first_interval=0.5)
 
 

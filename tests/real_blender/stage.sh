@@ -196,6 +196,8 @@ check = lambda ok, what: ok or problems.append(what)
 check(r.get("sidebar_tab") == "Mocap", f"sidebar tab {r.get('sidebar_tab')!r}, not Mocap")
 check(r.get("import", {}).get("result") == ["FINISHED"] and len(r["import"]["cameras"]) == 4, "Import Capture")
 check(r.get("check", {}).get("dofs") == 30, "Check rig: 30 DOF")
+check(r.get("preset") == {"name": "preview", "budget": [50, 4], "local_fit_fine": False},
+      f"the Preview preset: {r.get('preset')}")
 check(r.get("track_invoke") == ["RUNNING_MODAL"], "Track did not run modal")
 cancel = r.get("cancel", {})
 check(cancel.get("status", "").startswith("Cancelled after"), f"cancel status {cancel.get('status')!r}")
