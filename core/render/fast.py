@@ -7,7 +7,8 @@ operations in the same order, so both paths give identical label images from the
 (checked against reference.project_views = Camera.project_with_depth + reference.snap).
 
 Per task (one pose in one view) a worker reuses its own label / 1/z / chamfer buffers and touches only
-  * the template's bounding box (+1 pixel ring, cleared before drawing, so no full-image clears),
+  * the template's bounding box (+1 pixel ring, its labels cleared before drawing, so no full-image clears;
+    the 1/z buffer is never cleared: a pixel without a label takes any depth),
   * each triangle's own bounding box while rasterising,
   * the union of the template and observed boxes for the template chamfer transform (only when the
     Chamfer silhouette term is on): the 3-4 chamfer distance between two pixels is realised by a
@@ -37,7 +38,8 @@ def _chunks_one_at_a_time():
 @jit()
 def _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi):
     """Draw one mesh (vertices snapped to 1/SUBPIXEL px, `q`; iz = 0 marks unusable vertices) into
-    labels/zbuf (zero over the template box); widen each row's span to cover what it draws."""
+    labels/zbuf (labels zero over the template box, zbuf read only where a label is set); widen each row's
+    span to cover what it draws."""
     for f in range(faces.shape[0]):
         ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
         iza, izb, izc = iz[ia], iz[ib], iz[ic]
@@ -80,9 +82,12 @@ def _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_h
             for x in range(x0, x1 + 1):
                 inv_z = (float(w0) * iza + float(w1) * izb + float(w2) * izc) * inv_area
                 old = zbuf[y, x]
-                closer = (((w0 - t0) | (w1 - t1) | (w2 - t2)) >= 0) & (inv_z > old)
+                prev = labels[y, x]
+                # An empty pixel (label 0) takes any depth: the depth buffer needs no clearing (inv_z > 0
+                # inside a drawable triangle, so this is the test against a buffer of zeros).
+                closer = (((w0 - t0) | (w1 - t1) | (w2 - t2)) >= 0) & ((prev == 0) | (inv_z > old))
                 zbuf[y, x] = inv_z if closer else old
-                labels[y, x] = lab if closer else labels[y, x]
+                labels[y, x] = lab if closer else prev
                 w0 -= s0
                 w1 -= s1
                 w2 -= s2
@@ -148,7 +153,6 @@ def _one_task(q, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_
         row_hi[y] = -1
         for x in range(max(0, tx0 - 1), min(w - 1, tx1 + 1) + 1):
             labels[y, x] = 0
-            zbuf[y, x] = 0.0
     _rasterize(q, iz, faces, face_label, cull, w, h, labels, zbuf, row_lo, row_hi)
     n_t = 0
     n_overlap = 0
