@@ -30,7 +30,7 @@ MAX_ROUNDS = 12        # moves per step size
 # whose actor IS the subject (true factor 1.00; 20 calibration frames, seed 0, tools/landmark_length_bias.py):
 # with the masks the forearm came out 0.98 / 1.04 (landmarks 0.94 / 1.01) and the hip width 0.97 / 1.02
 # (landmarks 0.91 / 1.03); letting the masks refine every segment narrowed the shoulders (0.93 / 0.99),
-# lengthened the feet (1.11 / 1.11) and the shins (1.02 / 1.04) and left the spine no better: the outline of
+# lengthened the feet (1.11 / 1.13) and the shins (1.03 / 1.06) and left the spine no better: the outline of
 # a shoe on the floor, of shoulders beside hanging arms, is not what those segments' lengths set.
 SILHOUETTE_SEGMENTS = ("forearm", "hip_width")
 ROUNDS = 3               # pose refits (ICP on the masks with the current body), each followed by a factor search
@@ -39,7 +39,7 @@ ROUNDS = 3               # pose refits (ICP on the masks with the current body),
 @dataclasses.dataclass
 class SilhouetteRefinement:
     proportions: Proportions
-    cost_before: float   # mean per frame-view XOR / model area with the landmark fit's proportions
+    cost_before: float   # mean per frame-view XOR / model area with the landmark fit's proportions (final poses)
     cost_after: float
     evaluations: int
     poses: np.ndarray    # (F,D) the poses the factors were searched with
@@ -145,13 +145,11 @@ def refine_proportions(subject, proxy, cameras, masks, poses, proportions, backe
     z0 = np.log([proportions.factors[k] for k in keys])
     overall = proportions.overall
     free = np.array([segments is None or k in segments or k[2:] in segments for k in keys])
-    z, before, evaluations = z0.copy(), None, 0
+    z, evaluations = z0.copy(), 0
     for _ in range(max(1, rounds)):
         if rounds:  # the poses the masks want for the current body, then the body for those poses
             poses = refit_poses(*scaled_proxy(_with(keys, z, overall)), cameras, masks, poses, keypoints, resolution)
         cost = SilhouetteCost(subject, proxy, cameras, masks, poses, backend)
-        if before is None:
-            before = float(cost([proportions])[0])
 
         def objective(zs):
             zs = [np.where(free, v, z0) for v in zs]
@@ -160,7 +158,8 @@ def refine_proportions(subject, proxy, cameras, masks, poses, proportions, backe
         z = np.where(free, _pattern_search(objective, z, steps, log, free), z0)
         evaluations += cost.evaluations
     refined = _with(keys, z, overall)
-    return SilhouetteRefinement(refined, before, float(cost([refined])[0]), evaluations, poses)
+    before, after = cost([proportions, refined])
+    return SilhouetteRefinement(refined, float(before), float(after), evaluations, poses)
 
 
 def _pattern_search(objective, z, steps, log, free):
