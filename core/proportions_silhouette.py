@@ -21,17 +21,15 @@ from . import render
 from .proportions import Proportions, scaled_body, segment_lengths
 
 STEPS = (0.04, 0.02, 0.01, 0.005)  # log-factor steps of the pattern search, coarse to fine
-# Silhouette cost of a 1.0 log-factor departure from the landmark fit, squared, per frame-view: a tie-breaker,
-# small beside the XOR (a 1 % longer forearm changes a view's XOR by roughly 0.002-0.01 of its area)
+# Cost per squared log-factor departure from the landmark fit: a tie-breaker where the masks are flat. A 3 %
+# departure costs 2e-5; on the actor scene 3 % of spine moved the mean XOR / area by 0.01, of forearm by 3e-4.
 PULL_TO_LANDMARKS = 0.02
 MIN_MASK_PIXELS = 50   # a view whose mask has fewer pixels shows no person: left out for that frame
 MAX_ROUNDS = 12        # moves per step size
-# The segments the masks refine; the others keep the landmark fit's length. Measured on walk and playground,
-# whose actor IS the subject (true factor 1.00; 20 calibration frames, seed 0, tools/landmark_length_bias.py):
-# with the masks the forearm came out 0.98 / 1.04 (landmarks 0.94 / 1.01) and the hip width 0.97 / 1.02
-# (landmarks 0.91 / 1.03); letting the masks refine every segment narrowed the shoulders (0.93 / 0.99),
-# lengthened the feet (1.11 / 1.13) and the shins (1.03 / 1.06) and left the spine no better: the outline of
-# a shoe on the floor, of shoulders beside hanging arms, is not what those segments' lengths set.
+# The segments the masks refine; the others keep the landmark fit's length. On walk and playground (true
+# factor 1.00) the masks brought these two closer to 1 on average, but narrowed the shoulders and lengthened
+# feet and shins when left free on every segment: a shoe's outline on the floor, or shoulders beside hanging
+# arms, do not measure those lengths (README, "Actor calibration", has the figures).
 SILHOUETTE_SEGMENTS = ("forearm", "hip_width")
 ROUNDS = 3               # pose refits (ICP on the masks with the current body), each followed by a factor search
 

@@ -92,7 +92,7 @@ def test_prior_clips_map_onto_the_mixamo_rig(bpy_module):
     """The anatomical prior's CMU clips onto a Mixamo-named rig: its bones paired with CMU's by joint role (a
     Mixamo "Spine" is CMU's "LowerBack"), not by name (track failed with "name_map names target bone 'Hips'").
     The fitted DOF reproduce the retargeted bone heads less well than on the CMU rig (measured 33-111 mm RMS,
-    the arms worst, against 7-12 mm): the prior is built, but from coarser poses."""
+    the arms worst, against 7-13 mm): the prior is built, but from coarser poses."""
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
     from markerless_mocap.core.mocap.bvh import read_bvh
     from markerless_mocap.core.motion_to_dof import dof_sequence_from_clip, role_name_map
