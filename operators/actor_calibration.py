@@ -63,4 +63,9 @@ def describe(fit):
                          f"x{L[key] / S[key]:.3f})")
     lines.append(f"landmark residual {fit.rms_before * 1000:.1f} mm with the rig -> {fit.rms_after * 1000:.1f} mm "
                  f"calibrated, {len(fit.frames)} frames")
+    if fit.silhouettes:
+        refined = fit.silhouettes
+        mismatch = refined["mask_mismatch"]
+        lines.append(f"{' and '.join(s.replace('_', ' ') for s in refined['segments'])} refined against the person "
+                     f"masks (mismatch {mismatch['landmark_fit']:.3f} -> {mismatch['refined']:.3f})")
     return lines
