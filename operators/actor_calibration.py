@@ -66,6 +66,12 @@ def describe(fit):
     if fit.silhouettes:
         refined = fit.silhouettes
         mismatch = refined["mask_mismatch"]
-        lines.append(f"{' and '.join(s.replace('_', ' ') for s in refined['segments'])} refined against the person "
-                     f"masks (mismatch {mismatch['landmark_fit']:.3f} -> {mismatch['refined']:.3f})")
+        kept = refined.get("kept_at_landmark_fit", [])
+        moved = [s.replace("_", " ") for s in refined["segments"] if s not in kept]
+        if moved:
+            lines.append(f"{' and '.join(moved)} refined against the person masks (mismatch "
+                         f"{mismatch['landmark_fit']:.3f} -> {mismatch['refined']:.3f})")
+        if kept:
+            lines.append(f"{' and '.join(s.replace('_', ' ') for s in kept)} from the landmarks: the masks do not "
+                         "pin it down here")
     return lines

@@ -132,7 +132,7 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
                           "--no-overlays"], capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "actor: height" in run.stderr
-    assert "actor: forearm and hip width refined against the person masks (mismatch" in run.stderr
+    assert "refined against the person masks (mismatch" in run.stderr
     actor = load_actor(out / "actor.json")
     assert actor["frames"] == [0, 1, 2] and 1.3 < actor["height_m"] < 1.8
     # the landmark fit, then the masks refined the forearm and hip width (and nothing else)
