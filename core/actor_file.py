@@ -25,6 +25,8 @@ def save_actor(path, fit, subject_name="", capture=""):
             "factors": fit.proportions.factors, "overall": fit.proportions.overall,
             "height_m": fit.lengths["height"], "lengths_m": fit.lengths, "subject_lengths_m": fit.subject_lengths,
             "landmark_rms_m": {"subject": fit.rms_before, "calibrated": fit.rms_after}}
+    if fit.silhouettes is not None:
+        data["silhouettes"] = fit.silhouettes
     return write_actor(path, data)
 
 

@@ -5,7 +5,7 @@ alignment, T-pose vs A-pose), then each frame's bone matrices are fitted with th
 """
 import numpy as np
 
-from .mocap.retarget import retarget
+from .mocap.retarget import UNALIGNED_BONES, cmu_name_map, retarget
 from .pose_fitting import fit_pose_sequence
 
 
@@ -14,6 +14,28 @@ def driven_bone_indices(body):
     for d in body.dofs:
         bones.update(t.bone for t in d.targets)
     return np.array(sorted(bones))
+
+
+def role_name_map(body, source_joint_names):
+    """{target bone: source joint}, the bones that skip the rest alignment, and the left/right hip bones, for
+    a rig that is not CMU-named (Mixamo, Rigify): each role's bones paired in chain order with the CMU
+    preset's bones of that role (a Mixamo "Spine" is CMU's "LowerBack"), then the remaining bones whose name
+    without a namespace is a CMU name ("mixamorig:LeftHand"), each mapped to the clip's joint for that name."""
+    from .rig_presets import PRESETS
+
+    cmu = cmu_name_map(source_joint_names)
+    as_cmu = {}
+    for role, bones in body.roles.items():
+        for target, cmu_name in zip(bones, PRESETS["cmu"].get(role, ())):
+            as_cmu[target] = cmu_name
+    paired = set(as_cmu.values())
+    for name in body.skeleton.bone_names:
+        bare = name.split(":")[-1]
+        if name not in as_cmu and bare in cmu and bare not in paired:
+            as_cmu[name] = bare
+    name_map = {t: cmu[c] for t, c in as_cmu.items() if c in cmu}
+    unaligned = frozenset(t for t, c in as_cmu.items() if c in UNALIGNED_BONES)
+    return name_map, unaligned, (body.roles["l_hip"][0], body.roles["r_hip"][0])
 
 
 def dof_sequence_from_clip(body, clip, frames=None, name_map=None):
@@ -26,7 +48,11 @@ def dof_sequence_from_clip(body, clip, frames=None, name_map=None):
     parents = np.array([position[sk.parents[b]] if sk.parents[b] >= 0 else -1 for b in order])
     if frames is not None:
         clip = clip.subset(frames)
-    result = retarget(clip, sk.rest[order], parents, names, name_map=name_map)
+    options = {}
+    if name_map is None and body.preset not in ("cmu", ""):
+        name_map, unaligned, hips = role_name_map(body, clip.joint_names)
+        options = {"unaligned": unaligned, "facing_pair": hips}
+    result = retarget(clip, sk.rest[order], parents, names, name_map=name_map, **options)
     pose_arm = result.pose_matrices[:, position]  # back to the skeleton's bone order
     world = sk.armature_matrix @ pose_arm
     heads = world[..., :3, 3]

@@ -41,6 +41,9 @@ class ProportionsFit:
     rms_before: float      # landmark residual (m) of the subject, poses fitted
     rms_after: float       # the same with the fitted body
     poses: np.ndarray      # (F,D) the fitted body's poses for `frames`
+    # the silhouette refinement (core/proportions_silhouette.py), when it ran: the segments it refined, the
+    # landmark fit's factors, the mask mismatch before and after
+    silhouettes: dict | None = None
 
 
 def targets_from_landmarks(uv, visibility, rig_points):

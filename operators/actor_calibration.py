@@ -14,9 +14,10 @@ def calibration_frames(all_frames, count=DEFAULT_FRAMES):
 
 
 def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames=None, log=None, step=None,
-                    progress=None, symmetric=True):
+                    progress=None, symmetric=True, silhouettes=True):
     """Track `frames` (default: the first DEFAULT_FRAMES) with the rig into OUT/calibration_frames/, fit the
-    proportions, write OUT/actor.json. Returns (ProportionsFit, path of actor.json)."""
+    proportions to the landmarks, then (silhouettes=True) refine them against the person masks of the same
+    frames, write OUT/actor.json. Returns (ProportionsFit, path of actor.json)."""
     from ..core.actor_file import save_actor
     from ..core.proportions_fit import fit_proportions
     from .track_session import TrackSession
@@ -35,9 +36,16 @@ def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames
         if not est or est[0].landmarks is None:
             raise ValueError("calibration needs the learned landmarks: track with a likelihood that has 'kp' "
                              "(the default lsilh+edge+kp)")
-        fit = fit_proportions(session.character, session.capture.cameras, np.array([e.landmarks for e in est]),
-                              np.array([e.landmark_visibility for e in est]), np.array([e.pose for e in est]),
-                              frames=[e.frame for e in est], symmetric=symmetric)
+        landmarks = np.array([e.landmarks for e in est])
+        visibility = np.array([e.landmark_visibility for e in est])
+        fit = fit_proportions(session.character, session.capture.cameras, landmarks, visibility,
+                              np.array([e.pose for e in est]), frames=[e.frame for e in est], symmetric=symmetric)
+        if silhouettes:
+            from ..core.proportions_silhouette import refine_fit
+
+            log("calibration: refining the proportions against the person masks")
+            used = [[e.frame for e in est].index(f) for f in fit.frames]
+            fit = refine_fit(fit, session.character, session.tracker, landmarks[used], visibility[used], log=log)
     finally:
         session.capture.close()
     path = save_actor(out_dir / "actor.json", fit, subject_name=armature.name, capture=Path(capture_dir).resolve())
@@ -55,4 +63,15 @@ def describe(fit):
                          f"x{L[key] / S[key]:.3f})")
     lines.append(f"landmark residual {fit.rms_before * 1000:.1f} mm with the rig -> {fit.rms_after * 1000:.1f} mm "
                  f"calibrated, {len(fit.frames)} frames")
+    if fit.silhouettes:
+        refined = fit.silhouettes
+        mismatch = refined["mask_mismatch"]
+        kept = refined.get("kept_at_landmark_fit", [])
+        moved = [s.replace("_", " ") for s in refined["segments"] if s not in kept]
+        if moved:
+            lines.append(f"{' and '.join(moved)} refined against the person masks (mismatch "
+                         f"{mismatch['landmark_fit']:.3f} -> {mismatch['refined']:.3f})")
+        if kept:
+            lines.append(f"{' and '.join(s.replace('_', ' ') for s in kept)} from the landmarks: the masks do not "
+                         "pin it down here")
     return lines

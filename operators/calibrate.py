@@ -23,7 +23,8 @@ def show_calibration(props, actor_path, lines):
 
 class MOCAP_OT_calibrate_actor(bpy.types.Operator):
     """Fit the actor's height and segment lengths to the first frames of the capture (tracks them with the rig,
-    then fits the proportions to the learned landmarks); saved as actor.json in the output folder"""
+    fits the proportions to the learned landmarks, then the forearm and hip width to the person masks); saved as
+    actor.json in the output folder"""
 
     bl_idname = "mocap.calibrate_actor"
     bl_label = "Calibrate Actor"

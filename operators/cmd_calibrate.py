@@ -15,6 +15,9 @@ def add_arguments(p):
     p.add_argument("--armature", help="armature to use if the scene has several")
     p.add_argument("--asymmetric", action="store_true",
                    help="fit the left and right limbs separately (default: one length per segment for both sides)")
+    p.add_argument("--landmarks-only", action="store_true",
+                   help="fit to the learned landmarks alone (default: then refine the forearm and hip width against "
+                        "the person masks of the same frames)")
     add_tracking_options(p)
 
 
@@ -32,7 +35,8 @@ def run(args):
         armature = find_armature(scene, args.armature)
         fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args, backend),
                                     frames=parse_frames(args.frames), log=lambda m: print(m, file=sys.stderr),
-                                    step=StepPrinter(), symmetric=not args.asymmetric)
+                                    step=StepPrinter(), symmetric=not args.asymmetric,
+                                    silhouettes=not args.landmarks_only)
     except (SubjectError, ProportionsFitError, ValueError, FileNotFoundError, ResultWriteError,
             BackendUnavailableError) as exc:
         print(f"markerless_mocap calibrate: {exc}", file=sys.stderr)

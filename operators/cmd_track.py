@@ -69,6 +69,8 @@ def add_arguments(p):
                             "track with them and key the character with the actor's rotations")
     actor.add_argument("--actor", type=Path, help="reuse a saved actor calibration (actor.json of an earlier take)")
     p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 20 tracked)")
+    p.add_argument("--calibrate-landmarks-only", action="store_true",
+                   help="--calibrate from the landmarks alone (default: then refined against the person masks)")
     add_tracking_options(p)
 
 
@@ -147,7 +149,7 @@ def load_actor_option(args, scene, armature, backend=None):
 
         frames = parse_frames(args.frames)[:DEFAULT_FRAMES]
     fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args, backend),
-                                frames=frames,
+                                frames=frames, silhouettes=not args.calibrate_landmarks_only,
                                 log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
     for line in describe(fit):
         print(f"actor: {line}", file=sys.stderr)

@@ -40,21 +40,48 @@ def read_obj_body(obj_path, group="body"):
     return np.array(verts), faces
 
 
+def obj_group_vertices(obj_path):
+    """{group name: vertex indices (0-based) of its faces} for every group of an obj (MakeHuman's joint cubes)."""
+    groups, cur = {}, None
+    with open(obj_path) as fh:
+        for line in fh:
+            if line.startswith("g "):
+                cur = line.split()[1] if len(line.split()) > 1 else None
+            elif line.startswith("f ") and cur:
+                groups.setdefault(cur, set()).update(int(tok.split("/")[0]) - 1 for tok in line.split()[1:])
+    return {k: sorted(v) for k, v in groups.items()}
+
+
+def joint_from_mesh(spec, verts_blender, groups):
+    """A bone end placed on the mesh by MakeHuman's rule: the centre of a joint cube (strategy CUBE) or the
+    mean of listed vertices (MEAN), in Blender coordinates."""
+    if spec["strategy"] == "CUBE":
+        return verts_blender[groups[spec["cube_name"]]].mean(axis=0)
+    if spec["strategy"] == "MEAN":
+        return verts_blender[spec["vertex_indices"]].mean(axis=0)
+    return np.array(spec["default_position"], dtype=float)
+
+
 def obj_to_blender(v):
     """MakeHuman obj (Y-up, decimetres) -> Blender (Z-up, metres): (x, -z, y) * 0.1."""
     v = np.asarray(v, dtype=np.float64)
     return np.stack([v[:, 0], -v[:, 2], v[:, 1]], axis=1) * 0.1
 
 
-def load_subject_data(data_dir):
+def load_subject_data(data_dir, rig_name="cmu_mb"):
+    """The MakeHuman body with the rig `rig_name` (makehuman/rigs/rig.NAME.json and weights.NAME.json)."""
     data_dir = Path(data_dir) / "makehuman"
     verts, faces = read_obj_body(data_dir / "base.obj")
     used = sorted({i for f in faces for i in f})
     remap = {old: new for new, old in enumerate(used)}
     body_v = obj_to_blender(verts[used])
     body_f = [[remap[i] for i in f] for f in faces]
-    rig = json.loads((data_dir / "rigs" / "rig.cmu_mb.json").read_text())
-    weights = json.loads((data_dir / "rigs" / "weights.cmu_mb.json").read_text())["weights"]
+    rig = json.loads((data_dir / "rigs" / f"rig.{rig_name}.json").read_text())
+    # The Mixamo file (MakeHuman 1.1's format) nests its bones, and its default positions are those of
+    # MakeHuman's T-posed default character, not of base.obj: its joints are placed on this mesh instead
+    on_mesh = isinstance(rig.get("bones"), dict)
+    rig = rig["bones"] if on_mesh else rig
+    weights = json.loads((data_dir / "rigs" / f"weights.{rig_name}.json").read_text())["weights"]
     W = np.zeros((len(used), len(rig)))
     bone_names = order_bones(rig)
     col = {b: k for k, b in enumerate(bone_names)}
@@ -69,10 +96,15 @@ def load_subject_data(data_dir):
     floor = body_v[:, 2].min()
     body_v[:, 2] -= floor
     bones = {}
+    if on_mesh:
+        all_v, groups = obj_to_blender(verts), obj_group_vertices(data_dir / "base.obj")
     for name in bone_names:
         b = rig[name]
-        head = np.array(b["head"]["default_position"], dtype=float)
-        tail = np.array(b["tail"]["default_position"], dtype=float)
+        if on_mesh:
+            head, tail = (joint_from_mesh(b[end], all_v, groups) for end in ("head", "tail"))
+        else:
+            head = np.array(b["head"]["default_position"], dtype=float)
+            tail = np.array(b["tail"]["default_position"], dtype=float)
         head[2] -= floor
         tail[2] -= floor
         bones[name] = dict(head=head, tail=tail, roll=float(b.get("roll", 0.0)), parent=b.get("parent") or None,
@@ -105,13 +137,15 @@ def face_regions(data):
     names = data["bone_names"]
     V = data["verts"]
     region_of_bone = {b: r for r, bl in REGIONS.items() for b in bl}
-    head = data["bones"]["Head"]
+    region_of_bone.update({f"mixamorig:{b}": r for b, r in list(region_of_bone.items())})  # the Mixamo rig's names
+    head_name = next(n for n in names if n.split(":")[-1] == "Head")
+    head = data["bones"][head_name]
     top = V[:, 2].max()
     out = []
     for f in data["faces"]:
         b = names[int(np.argmax(W[f].sum(axis=0)))]
         r = region_of_bone.get(b, "skin")
-        if b == "Head":
+        if b == head_name:
             c = V[f].mean(axis=0)
             # cap: everything above the brow, and the back of the skull down to the nape
             if c[2] > top - 0.075 or (c[2] > head["head"][2] + 0.04 and c[1] > head["head"][1] + 0.035):

@@ -118,7 +118,7 @@ def test_cli_reuses_a_saved_calibration_and_refuses_a_bad_one(subject_with_actor
 
 def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     """`track --calibrate` end to end (a tiny search budget, 3 calibration frames, 2 tracked): OUT/actor.json is
-    written, joints.npz holds the calibrated actor's bones (its forearm length), and the BVH the rig's own
+    written (with the mask refinement's record), joints.npz holds the calibrated actor's bones (its forearm length), and the BVH the rig's own
     bones (the character is keyed, not stretched)."""
     import json
 
@@ -132,8 +132,14 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
                           "--no-overlays"], capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "actor: height" in run.stderr
+    assert "refined against the person masks (mismatch" in run.stderr
     actor = load_actor(out / "actor.json")
     assert actor["frames"] == [0, 1, 2] and 1.3 < actor["height_m"] < 1.8
+    # the landmark fit, then the masks refined the forearm and hip width (and nothing else)
+    refined = actor["silhouettes"]
+    assert refined["segments"] == ["forearm", "hip_width"]
+    assert refined["mask_mismatch"]["refined"] <= refined["mask_mismatch"]["landmark_fit"]
+    assert {k for k, v in actor["factors"].items() if v != refined["landmark_factors"][k]} <= {"forearm", "hip_width"}
     assert json.loads((out / "report.json").read_text())["actor"]["lengths_m"] == actor["lengths_m"]
     with np.load(out / "joints.npz") as z:
         names, P = [str(n) for n in z["names"]], z["positions"]
