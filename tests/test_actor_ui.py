@@ -145,8 +145,12 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
         names, P = [str(n) for n in z["names"]], z["positions"]
     fore = np.linalg.norm(P[:, names.index("LeftHand")] - P[:, names.index("LeftForeArm")], axis=1)
     np.testing.assert_allclose(fore, actor["lengths_m"]["l_forearm"], rtol=1e-6)
-    rig_fore = actor["subject_lengths_m"]["l_forearm"]
-    text = (out / "animation.bvh").read_text().split("JOINT LeftHand", 1)[1]
-    offset = np.array([float(v) for v in text.split("OFFSET", 1)[1].split("\n", 1)[0].split()])
-    assert np.linalg.norm(offset) == pytest.approx(rig_fore, rel=1e-4)  # the character's forearm in the BVH
-    assert abs(rig_fore - actor["lengths_m"]["l_forearm"]) > 1e-3
+    bvh = (out / "animation.bvh").read_text()
+    for segment, child in (("l_forearm", "LeftHand"), ("l_thigh", "LeftLeg")):
+        rig_length = actor["subject_lengths_m"][segment]
+        offset = np.array([float(v) for v in bvh.split(f"JOINT {child}", 1)[1].split("OFFSET", 1)[1].split("\n", 1)[0]
+                           .split()])
+        assert np.linalg.norm(offset) == pytest.approx(rig_length, rel=1e-4)  # the character's bone in the BVH
+    # ... not the actor's: the actor is 8 % shorter overall (the forearm, 10 % longer than scaled, may fit
+    # the rig's length from three frames at this budget)
+    assert abs(actor["subject_lengths_m"]["l_thigh"] - actor["lengths_m"]["l_thigh"]) > 0.01
