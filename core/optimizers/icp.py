@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from ..camera import Camera
 from ..render.rim import MeshEdges, rim_vertices
-from ..rotations import axis_angle_matrix, matrix_to_rotvec, rotvec_to_matrix
+from ..rotations import matrix_to_rotvec, rotvec_to_matrix
 from .base import CountingEnergy, Optimizer, OptimizerInputError, PoseSpace
 
 MIN_CORRESPONDENCES = 6  # below this an iteration cannot constrain a pose: stop instead of guessing
@@ -183,14 +183,26 @@ def vertex_jacobian(body, pose_abs, rest_vertices, weights, descendants=None) ->
         lever = S[:, b] - Wd[:, b, None] * G[:3, 3]  # sum_s w_s (X_s - q')
         acc = np.eye(3)
         for i, axis, share in body.bone_dofs[b]:
-            w = R @ acc @ axis
-            J[:, :, i] += share * np.cross(w / np.linalg.norm(w), lever)
-            acc = acc @ axis_angle_matrix(axis, x[i] * share)
+            w = R @ (acc @ axis)
+            # w x lever for every row, as one small matmul (np.cross's overhead was most of the local fit's)
+            J[:, :, i] += lever @ (share * _cross_matrix(w / math.sqrt(float(w @ w)))).T
+            acc = acc @ _axis_rotation(axis, x[i] * share)
     J[:, :, body.translation_dofs] = Wd[:, r, None, None] * np.eye(3)
     lever = S[:, r] - Wd[:, r, None] * world[r, :3, 3]
     for k, i in enumerate(body.root_rotation_dofs):
-        J[:, :, i] = np.cross(np.eye(3)[k], lever)
+        J[:, :, i] = lever @ _cross_matrix(np.eye(3)[k]).T
     return J
+
+
+def _cross_matrix(w):
+    """[w]x: the 3x3 matrix with [w]x v = w x v."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def _axis_rotation(axis, angle):
+    """Rodrigues' rotation about one unit axis (scalar angle), without the batched helper's overhead."""
+    k = _cross_matrix(axis)
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
 
 
 def projection_jacobian(camera: Camera, points, step: float = 1e-7) -> np.ndarray:
@@ -207,11 +219,9 @@ def projection_jacobian(camera: Camera, points, step: float = 1e-7) -> np.ndarra
     dn[:, 1, 2] = -yn / z
     if camera.has_distortion:
         xy = np.stack([xn, yn], axis=1)
-        dd = np.empty((len(p), 2, 2))
-        for k in range(2):
-            e = np.zeros(2)
-            e[k] = step
-            dd[:, :, k] = (camera.distort_normalized(xy + e) - camera.distort_normalized(xy - e)) / (2 * step)
+        e = np.array([[step, 0.0], [-step, 0.0], [0.0, step], [0.0, -step]])
+        moved = camera.distort_normalized(xy[None] + e[:, None]).reshape(4, len(p), 2)  # one call for all four
+        dd = np.stack([moved[0] - moved[1], moved[2] - moved[3]], axis=-1) / (2 * step)  # (N, 2, 2)
         dn = dd @ dn
     K2 = camera.K[:2, :2]
     return K2 @ dn @ camera.R

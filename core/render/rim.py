@@ -214,9 +214,8 @@ def rim_vertices(vertices, faces, camera, edges: MeshEdges | None = None, *, dep
     n = np.stack([d[:, 1], -d[:, 0]], axis=1)  # length = edge length: longer edges weigh more
     inward = uv[edges.incidence_opposite[inc]] - uv[e[:, 0]]
     n *= np.where(np.einsum("ni,ni->n", n, inward) > 0, -1.0, 1.0)[:, None]
-    acc = np.zeros((len(vertices), 2))
-    np.add.at(acc, e[:, 0], n)
-    np.add.at(acc, e[:, 1], n)
+    ends = np.concatenate([e[:, 0], e[:, 1]])  # each edge's normal goes to both its vertices (bincount: add.at is slow)
+    acc = np.stack([np.bincount(ends, weights=np.tile(n[:, k], 2), minlength=len(vertices)) for k in range(2)], axis=1)
 
     ids = np.unique(edges.edges[rim])
     norm = np.linalg.norm(acc[ids], axis=1)
