@@ -259,21 +259,23 @@ class Tracker:
         capture, the background models and the landmark model: it may run in the prefetch thread."""
         images = self.capture.frames.read(frame)
         cams = self.capture.cameras
-        masks = [None] * len(cams)
         evidence = None
         if self.energy.weights.needs_learned_evidence:
             evidence = self.observe(images, guide_poses)
-            if self.energy.weights.mask == "learned":
-                masks = [ev.mask if ev.found else None for ev in evidence]
-        masks = [self.backgrounds[cam.name].silhouette(images[cam.name]) if mask is None else mask
-                 for cam, mask in zip(cams, masks)]
-        fine = None
-        if self.refines and self.refine_scale != self.scale:
-            fine = [resize_mask(check_mask(mask), feature_size(images[cam.name].shape, self.refine_scale))
-                    for cam, mask in zip(cams, masks)]
+        learned = evidence if evidence is not None and self.energy.weights.mask == "learned" else [None] * len(cams)
+        scales = [self.scale] + ([self.refine_scale] if self.refines and self.refine_scale != self.scale else [])
+        masks = []  # per camera: a silhouette per scale
+        for cam, ev in zip(cams, learned):
+            shape = images[cam.name].shape
+            if ev is not None and ev.found:  # the model's mask, sampled straight at each feature resolution
+                masks.append([ev.mask_at(feature_size(shape, s)) for s in scales])
+            else:
+                sil = check_mask(self.backgrounds[cam.name].silhouette(images[cam.name]))
+                masks.append([resize_mask(sil, feature_size(shape, s)) for s in scales])
+        fine = [m[1] for m in masks] if len(scales) > 1 else None
         feats = [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
-                                       diffuse=self.uses_color, silhouette=mask)
-                 for cam, mask in zip(cams, masks)]
+                                       diffuse=self.uses_color, silhouette=m[0])
+                 for cam, m in zip(cams, masks)]
         return feats, evidence, fine
 
     # ---- the next frame, observed while this one is finished

@@ -259,8 +259,12 @@ def test_compute_view_features_at_half_resolution(room):
     assert feats.edge_dt.max() <= 10.0 + 1e-6            # 20 px at full resolution -> 10 px at half
     np.testing.assert_allclose(feats.edge_dt, np.minimum(ndimage.distance_transform_edt(~feats.edges), 10.0),
                                atol=1e-3)
-    small = cv2.resize(img.astype(np.float32) / 255, (160, 120), interpolation=cv2.INTER_AREA)
+    # Integer frames are resampled before they become float (HD footage); against the float-first
+    # resampling that costs at most the uint8 rounding of a pixel (under 1 a/b unit, of about +-128).
+    small = cv2.resize(img, (160, 120), interpolation=cv2.INTER_AREA).astype(np.float32) / 255
     np.testing.assert_allclose(feats.lab_ab, lab_ab(small), atol=1e-3)
+    small_float = cv2.resize(img.astype(np.float32) / 255, (160, 120), interpolation=cv2.INTER_AREA)
+    np.testing.assert_allclose(feats.lab_ab, lab_ab(small_float), atol=1.0)
     with pytest.raises(FeatureInputError, match="scale"):
         compute_view_features(img, BackgroundModel.from_plate(shot), scale=2.0)
 

@@ -8,7 +8,7 @@ from scene_helpers import ground_truth_poses, scene_dir
 
 from markerless_mocap.core.features.learned import (INPUT_SIZE, CropBox, LandmarkModel, LearnedModelError,
                                                      ViewEvidence, crop_around, crop_image, locate,
-                                                     mask_to_image)
+                                                     mask_at_size, mask_to_image)
 
 LIMB_LANDMARKS = {11: "LeftArm", 12: "RightArm", 13: "LeftForeArm", 14: "RightForeArm", 15: "LeftHand",
                   16: "RightHand", 23: "LeftUpLeg", 24: "RightUpLeg", 25: "LeftLeg", 26: "RightLeg",
@@ -37,6 +37,24 @@ def test_mask_outside_the_crop_is_unknown():
     assert known[80, 100] and prob[80, 100] == pytest.approx(1.0)
     assert not known[80, 200] and not known[10, 10]
     assert abs(int(known.sum()) - 64 * 64) <= 2 * 64 + 4  # the square, up to its border pixels
+
+
+def test_mask_sampled_at_a_feature_size_matches_the_full_resolution_path():
+    """The tracker samples the crop's mask straight at its feature resolutions (mask_at); the reference is the
+    full-resolution mask area-resampled. A blob in a crop partly outside an HD frame, at 0.1 and 0.23."""
+    yy, xx = np.mgrid[0:INPUT_SIZE, 0:INPUT_SIZE]
+    prob = 1.0 / (1.0 + np.exp(-(40.0 - np.hypot(xx - 140.0, (yy - 110.0) * 0.5)) / 3.0)).astype(np.float32)
+    box = CropBox(cx=900.3, cy=1500.7, size=1100.0)  # reaches past the bottom of a 1080 x 1920 frame
+    lazy = ViewEvidence(None, np.zeros((33, 2)), np.ones(33), 1.0, box, crop_prob=prob, image_size=(1080, 1920))
+    reference = ViewEvidence(mask_to_image(prob, box, 1080, 1920), np.zeros((33, 2)), np.ones(33), 1.0, box)
+    for scale in (0.1, 0.23):
+        size = (int(round(1080 * scale)), int(round(1920 * scale)))
+        fast, slow = lazy.mask_at(size), reference.mask_at(size)
+        assert fast.shape == slow.shape == size[::-1]
+        assert slow.sum() > 500 * scale and (fast ^ slow).sum() <= 0.02 * slow.sum() + 2  # only boundary pixels
+        direct = mask_at_size(prob, box, (1080, 1920), size)
+        assert direct.min() >= 0.0 and direct.max() <= 1.0
+    assert np.array_equal(lazy.mask, reference.mask)  # the full-resolution mask made on demand is the same
 
 
 def test_crop_around_is_a_square_with_margin():

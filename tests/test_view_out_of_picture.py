@@ -37,8 +37,11 @@ def test_views_in_play_rules():
 @pytest.mark.bpy
 def test_tracking_goes_on_when_the_person_vanishes_from_one_view(tmp_path):
     """walk, cam2's frames 3-9 replaced by its empty plate (the person is gone from that view), the
-    paper's silh+edge likelihood, 40 x 6, seed 0, from the true first pose. Measured: with the view left
-    out, frames 3-9 at 23.5-39.4 mm (mean 30.3); with every view kept, 31.3-51.5 mm (mean 42.5)."""
+    paper's silh+edge likelihood, 40 x 6, seeds 0 and 1, from the true first pose. Measured (seed 0, older
+    features): with the view left out, frames 3-9 at 23.5-39.4 mm (mean 30.3); with every view kept,
+    31.3-51.5 mm (mean 42.5). At this small budget one seed's worst frame moves by 10-15 mm with any change
+    to the features: seeds 0-4 left out, mean of frames 3-9 25.3-34.2 mm, worst frame 30.7-47.5 mm; hence two
+    seeds and bounds on their mean and worst."""
     pytest.importorskip("bpy")
     import cv2
 
@@ -55,13 +58,16 @@ def test_tracking_goes_on_when_the_person_vanishes_from_one_view(tmp_path):
     rewrite_video(folder / "videos" / "cam2.mp4", edit=lambda i, img: plate.copy() if i in gone else img)
     capture = load_capture(folder)
     prior, dynamics = build_motion_models(body, fps=capture.frames.fps, exclude=scene_exclusion(scene_dir("walk")))
-    tracker = Tracker(body, capture, TrackingSettings(particles=40, iterations=6, seed=0, likelihood="silh+edge"),
-                      prior=prior, dynamics=dynamics)
-    estimates = run_tracker(tracker, range(0, 13), initial_pose=truth[0])
+    gone_means, worst = [], []
+    for seed in (0, 1):
+        tracker = Tracker(body, capture, TrackingSettings(particles=40, iterations=6, seed=seed,
+                                                          likelihood="silh+edge"), prior=prior, dynamics=dynamics)
+        estimates = run_tracker(tracker, range(0, 13), initial_pose=truth[0])
+        error_mm = {e.frame: float(np.linalg.norm(body.joint_positions(e.pose[None])[0] - body.joint_positions(
+            truth[e.frame][None])[0], axis=-1).mean() * 1000) for e in estimates}
+        print(f"seed {seed} error per frame (mm):", {f: round(v, 1) for f, v in error_mm.items()})
+        assert tracker.views_left_out == {f: ["cam2"] for f in gone}
+        gone_means.append(np.mean([error_mm[f] for f in gone]))
+        worst.append(max(error_mm.values()))
     capture.close()
-    error_mm = {e.frame: float(np.linalg.norm(body.joint_positions(e.pose[None])[0]
-                                              - body.joint_positions(truth[e.frame][None])[0], axis=-1).mean() * 1000)
-                for e in estimates}
-    print("error per frame (mm):", {f: round(v, 1) for f, v in error_mm.items()})
-    assert tracker.views_left_out == {f: ["cam2"] for f in gone}
-    assert np.mean([error_mm[f] for f in gone]) < 36 and max(error_mm.values()) < 45
+    assert np.mean(gone_means) < 34 and max(worst) < 50

@@ -130,18 +130,61 @@ def mask_to_image(prob_crop, box, width, height):
     return prob
 
 
+def mask_at_size(prob_crop, box, image_size, size_wh):
+    """A crop's mask probabilities sampled straight at the centres of a (width, height) grid laid over the
+    whole image (a feature resolution): 0 outside the crop. Skips the full-resolution image, which for HD
+    footage costs more than the model's look at the crop."""
+    width, height = image_size
+    fw, fh = size_wh
+    sx, sy = fw / width, fh / height
+    # grid pixel centre (u + 0.5) sits at image (u + 0.5) / sx, i.e. image pixel centre (u + 0.5) / sx - 0.5
+    to_image = np.array([[1 / sx, 0.0, 0.5 / sx - 0.5], [0.0, 1 / sy, 0.5 / sy - 0.5], [0.0, 0.0, 1.0]])
+    grid_to_crop = box.image_to_crop_matrix() @ to_image
+    return cv2.warpAffine(np.asarray(prob_crop, np.float32), grid_to_crop, (int(fw), int(fh)),
+                          flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT,
+                          borderValue=0.0)
+
+
 # ---------------------------------------------------------------------------------------- the model
-@dataclass
 class ViewEvidence:
-    """One view's learned evidence, in the camera's full-resolution pixels."""
-    mask_prob: np.ndarray   # float32 HxW person probability; NaN where the crop did not look (unknown)
-    keypoints: np.ndarray   # (33, 2) landmark positions
-    visibility: np.ndarray  # (33,) in [0, 1]: the landmark is in view and not occluded
-    presence: float         # the model's confidence that a person is in the crop
-    box: CropBox | None     # where it looked; None: no evidence in this view this frame
-    # (33, ALTERNATIVES, 3): second guesses per landmark from the heatmaps, (u, v) image pixels and the
-    # gap in logits below the landmark's top peak; NaN rows where there is none. None: not computed.
-    alternatives: np.ndarray | None = None
+    """One view's learned evidence, in the camera's full-resolution pixels.
+
+    mask_prob     float32 HxW person probability; NaN where the crop did not look (unknown). Made from the
+                  crop's probabilities on first use when the evidence comes from the model (`crop_prob`):
+                  the tracker asks only for masks at its feature resolutions (mask_at).
+    keypoints     (33, 2) landmark positions
+    visibility    (33,) in [0, 1]: the landmark is in view and not occluded
+    presence      the model's confidence that a person is in the crop
+    box           where it looked; None: no evidence in this view this frame
+    alternatives  (33, ALTERNATIVES, 3): second guesses per landmark from the heatmaps, (u, v) image pixels
+                  and the gap in logits below the landmark's top peak; NaN rows where there is none.
+                  None: not computed.
+    """
+
+    def __init__(self, mask_prob, keypoints, visibility, presence, box, alternatives=None, crop_prob=None,
+                 image_size=None):
+        if mask_prob is None and (crop_prob is None or box is None or image_size is None):
+            raise FeatureInputError("ViewEvidence needs the full-resolution mask or the crop's mask, box and "
+                                    "image size")
+        self._mask_prob = mask_prob
+        self.crop_prob = crop_prob
+        self.image_size = tuple(image_size) if image_size is not None else tuple(mask_prob.shape[1::-1])
+        self.keypoints = keypoints
+        self.visibility = visibility
+        self.presence = presence
+        self.box = box
+        self.alternatives = alternatives
+
+    @property
+    def mask_prob(self):
+        if self._mask_prob is None:
+            self._mask_prob = mask_to_image(self.crop_prob, self.box, *self.image_size)
+        return self._mask_prob
+
+    @mask_prob.setter
+    def mask_prob(self, value):
+        self._mask_prob, self.crop_prob = value, None
+        self.image_size = tuple(np.shape(value)[1::-1])
 
     @property
     def found(self):
@@ -152,6 +195,18 @@ class ViewEvidence:
         """bool HxW: person where the model says so; unknown counts as not person."""
         with np.errstate(invalid="ignore"):
             return np.nan_to_num(self.mask_prob, nan=0.0) >= MASK_THRESHOLD
+
+    def mask_at(self, size_wh):
+        """bool mask on a (width, height) grid over the image (a feature resolution): person where the
+        model's probability at the grid pixel's centre reaches MASK_THRESHOLD."""
+        size_wh = (int(size_wh[0]), int(size_wh[1]))
+        if size_wh == self.image_size:
+            return self.mask
+        if self._mask_prob is None:
+            return mask_at_size(self.crop_prob, self.box, self.image_size, size_wh) >= MASK_THRESHOLD
+        from .view_features import resize_mask
+
+        return resize_mask(self.mask, size_wh)
 
     @property
     def known(self):
@@ -209,8 +264,8 @@ class LandmarkModel:
             vis = _sigmoid(lm[:N_LANDMARKS, 3]) * _sigmoid(lm[:N_LANDMARKS, 4])
             alternatives = heatmap_alternatives(hm[:N_LANDMARKS], lm[:N_LANDMARKS, :2])
             alternatives[..., :2] = box.to_image(alternatives[..., :2])
-            out.append(ViewEvidence(mask_to_image(_sigmoid(logit), box, w, h), kp, vis, float(pres), box,
-                                    alternatives))
+            out.append(ViewEvidence(None, kp, vis, float(pres), box, alternatives,
+                                    crop_prob=_sigmoid(logit).astype(np.float32), image_size=(w, h)))
         return out
 
 

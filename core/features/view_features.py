@@ -95,18 +95,21 @@ def compute_view_features(image_bgr: np.ndarray, background: BackgroundModel | N
                           silhouette: np.ndarray | None = None) -> ViewFeatures:
     """Features of one frame of one camera at `scale` x its resolution (scale 0.5 -> half width/height).
 
-    The silhouette is found at the camera resolution (the background model's, unless a camera-resolution
-    `silhouette` is given, e.g. the learned person mask) and area-resampled.
+    The silhouette is found at the camera resolution (the background model's, unless a `silhouette` is
+    given at the camera or the feature resolution, e.g. the learned person mask) and area-resampled.
     """
-    img = as_bgr_float(image_bgr, "frame")
-    size = feature_size(img.shape, scale)
+    image = np.asarray(image_bgr)
+    # Integer footage is resampled before it becomes float: an HD frame's float copy costs more than the rest.
+    if image.dtype not in (np.uint8, np.uint16) or image.ndim != 3 or image.shape[2] != 3:
+        image = as_bgr_float(image, "frame") / np.float32(255.0)  # checks shape and range; float in [0, 1]
+    size = feature_size(image.shape, scale)
     if silhouette is None:
         if background is None:
             raise FeatureInputError("compute_view_features needs a background model or a silhouette")
         silhouette = background.silhouette(image_bgr)
     silhouette = resize_mask(check_mask(silhouette), size)
-    small = img if size == img.shape[1::-1] else cv2.resize(img, size, interpolation=cv2.INTER_AREA)
-    small01 = np.clip(small / np.float32(255.0), 0.0, 1.0)
+    small = image if size == image.shape[1::-1] else cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    small01 = np.clip(as_bgr_float(small, "frame") / np.float32(255.0), 0.0, 1.0)
     edges = sobel_edges(small01, silhouette, edge_percentile)
     cap = EDGE_DT_CAP_PX * scale
     edge_dt = np.minimum(distance_to_mask(edges), np.float32(cap)).astype(np.float32)
