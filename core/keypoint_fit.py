@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
+from .keypoints import LIMB_LANDMARKS
 from .rotations import matrix_to_rotvec, rotvec_to_matrix
 
 MIN_WEIGHT = 0.2        # a landmark takes part in triangulation above this weight (every found view: see
@@ -125,6 +126,18 @@ def triangulated_landmarks(cameras, targets, rig_points):
     """The frame's landmarks in 3D: (K,3) points and (K,) ok, left/right swaps resolved per view."""
     uv, weight = resolve_swaps(cameras, targets.uv, targets.weight, rig_points.swap)
     return triangulate(cameras, uv, weight)
+
+
+def limb_distances_3d(rig_points, world_points, X, ok):
+    """{limb: the largest distance (metres) of its landmark points (elbow and wrist, knee and ankle) of one
+    pose, world_points (K,3), from the triangulated landmarks X (K,3) where ok}; limbs with none left out."""
+    index = {int(lm): i for i, lm in enumerate(rig_points.landmarks)}
+    out = {}
+    for limb, landmarks in LIMB_LANDMARKS.items():
+        idx = [index[lm] for lm in landmarks if lm in index and ok[index[lm]]]
+        if idx:
+            out[limb] = float(np.linalg.norm(world_points[idx] - X[idx], axis=1).max())
+    return out
 
 
 def pose_from_keypoints(body, cameras, targets, rig_points, x_start):

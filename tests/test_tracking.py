@@ -245,25 +245,53 @@ def test_compare_from_truth_needs_every_bone(tmp_path):
               "--rows", "icp:silh", "--out", str(tmp_path / "c")])
 
 
-def test_a_limb_off_its_landmarks_is_refitted_to_them(walk):
-    """The keypoint proposal: an estimate whose left arm is swung 80 degrees away from the truth is
-    refitted to the triangulated landmarks (and the local fit), kept because it lowers the energy, and
-    brings the left wrist back near the truth."""
+def _frame_one_with_a_wrong_left_arm(walk, role, degrees):
+    """Walk frame 1 loaded around the truth, and the true pose with the left `role` DOF turned by `degrees`
+    (within its limits): (tracker, features, the wrong pose relative, its energy, the per-view measure,
+    the left wrist's distance from the truth for an absolute pose)."""
     body, gt = walk["body"], walk["gt"]
     tracker = make_tracker(walk, particles=20, iterations=2, seed=0)
     tracker.initialise(0, initial_pose=gt[0])
     feats = tracker.load_frame(1, gt[1][None])
     wrong = gt[1].copy()
-    flex = [i for i, d in enumerate(body.dofs) if d.role == "l_shoulder"][0]
-    wrong[flex] += np.deg2rad(80.0)
+    dof = [i for i, d in enumerate(body.dofs) if d.role == role][0]
+    wrong[dof] = np.clip(wrong[dof] + np.deg2rad(degrees), body.lower[dof], body.upper[dof])
     relative = tracker.to_relative(wrong)
-    energy = float(tracker._energy_fn(relative[None])[0])
-    off = tracker._limbs_off(relative)
+    wrist = body.skeleton.index["LeftHand"]
+    true_wrist = body.joint_positions(gt[1][None])[0, wrist]
+
+    def wrist_error(pose):
+        return float(np.linalg.norm(body.joint_positions(pose[None])[0, wrist] - true_wrist))
+
+    return (tracker, feats, relative, float(tracker._energy_fn(relative[None])[0]), tracker._limbs_off(relative),
+            wrist_error)
+
+
+def test_a_limb_off_its_landmarks_is_refitted_to_them(walk):
+    """The keypoint proposal: an estimate whose left arm is swung 80 degrees away from the truth is
+    refitted to the triangulated landmarks (and the local fit), kept because it lowers the energy, and
+    brings the left wrist back near the truth."""
+    tracker, feats, relative, energy, off, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_shoulder", 80.0)
     assert off["left arm"] > 0.1 and off["right arm"] < 0.1
     fixed, fixed_energy, _ = tracker._keypoint_proposal(feats, relative, energy, 0, off)
-    wrist = body.skeleton.index["LeftHand"]
-    error = [np.linalg.norm(body.joint_positions(p[None])[0, wrist] - body.joint_positions(gt[1][None])[0, wrist])
-             for p in (wrong, tracker.to_absolute(fixed))]
+    error = [wrist_error(tracker.to_absolute(p)) for p in (relative, fixed)]
     print(f"left wrist {1000 * error[0]:.0f} -> {1000 * error[1]:.0f} mm, energy {energy:.3f} -> {fixed_energy:.3f}")
     assert fixed_energy < energy and tracker.proposals[-1] == {"limbs": ["left arm"], "kept": True}
     assert error[1] < 0.06 < error[0]
+
+
+def test_a_hand_off_in_3d_is_proposed_though_the_views_median_is_small(walk):
+    """The elbow bent 45 degrees too far: the elbow's landmarks agree, so the per-view measure (a median
+    over the elbow's and the wrist's views) stays under RECOVERY_DISTANCE, but the wrist lies more than
+    RECOVERY_DISTANCE_3D from its triangulated landmark: the proposal is made, kept, and the wrist comes back."""
+    from markerless_mocap.core.tracking import RECOVERY_DISTANCE, RECOVERY_DISTANCE_3D
+
+    tracker, feats, relative, energy, off, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_elbow", 45.0)
+    before = wrist_error(tracker.to_absolute(relative))
+    print(f"per-view measure {off['left arm']:.3f}, wrist {1000 * before:.0f} mm off")
+    assert off["left arm"] < RECOVERY_DISTANCE and before > RECOVERY_DISTANCE_3D + 0.03
+    fixed, fixed_energy, _ = tracker._keypoint_proposal(feats, relative, energy, 0, off)
+    after = wrist_error(tracker.to_absolute(fixed))
+    print(f"left wrist {1000 * before:.0f} -> {1000 * after:.0f} mm, energy {energy:.3f} -> {fixed_energy:.3f}")
+    assert tracker.proposals[-1] == {"limbs": ["left arm"], "kept": True}
+    assert fixed_energy < energy and after < 0.06
