@@ -1,10 +1,14 @@
 """Batched rotation helpers (rotation vectors, axis-angle, matrices) in NumPy."""
+import math
+
 import numpy as np
 
 
 def skew(v):
-    """(...,3) -> (...,3,3) cross-product matrices."""
+    """(...,3) -> (...,3,3) cross-product matrices: skew(w) @ v = w x v."""
     v = np.asarray(v, dtype=np.float64)
+    if v.shape == (3,):  # one vector: a literal (the local fit calls this per DOF, where overhead dominates)
+        return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
     out = np.zeros(v.shape[:-1] + (3, 3))
     out[..., 0, 1] = -v[..., 2]
     out[..., 0, 2] = v[..., 1]
@@ -19,6 +23,9 @@ def axis_angle_matrix(axis, angle):
     """Rotation by `angle` (...,) about the unit `axis` (3,) or (...,3): Rodrigues' formula."""
     axis = np.asarray(axis, dtype=np.float64)
     angle = np.asarray(angle, dtype=np.float64)
+    if angle.ndim == 0 and axis.shape == (3,):  # one rotation: scalar trigonometry, no broadcasting
+        k = skew(axis)
+        return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
     k = skew(np.broadcast_to(axis, angle.shape + (3,)))
     s = np.sin(angle)[..., None, None]
     c = np.cos(angle)[..., None, None]

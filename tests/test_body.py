@@ -239,3 +239,19 @@ def test_pose_fit_recovers_heads_and_holds_unseen_angles(subject):
     assert np.abs(fitted - heads).max() < 0.01
     assert residual.max() < 0.005
     assert np.abs(poses[:, twist]).max() < 0.05
+
+
+def test_single_rotation_fast_path_equals_the_batched_formula():
+    """skew and axis_angle_matrix take a literal / scalar path for one vector and one angle (the local fit
+    calls them per DOF): the same matrices as the batched path."""
+    from markerless_mocap.core.rotations import axis_angle_matrix, skew
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = float(rng.uniform(-3.0, 3.0))
+        v = rng.normal(size=3)
+        assert np.allclose(skew(axis) @ v, np.cross(axis, v), atol=1e-12)
+        assert np.allclose(skew(axis), skew(axis[None])[0], atol=0)
+        assert np.allclose(axis_angle_matrix(axis, angle), axis_angle_matrix(axis, np.array([angle]))[0], atol=1e-14)

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from .errors import FeatureInputError
+from .view_features import resize_mask
 
 MODEL_PATH = Path(__file__).resolve().parents[1] / "data" / "models" / "pose_landmark_full.tflite"
 INPUT_SIZE = 256
@@ -204,8 +205,6 @@ class ViewEvidence:
             return self.mask
         if self._mask_prob is None:
             return mask_at_size(self.crop_prob, self.box, self.image_size, size_wh) >= MASK_THRESHOLD
-        from .view_features import resize_mask
-
         return resize_mask(self.mask, size_wh)
 
     @property

@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from ..camera import Camera
 from ..render.rim import MeshEdges, rim_vertices
-from ..rotations import matrix_to_rotvec, rotvec_to_matrix
+from ..rotations import axis_angle_matrix, matrix_to_rotvec, rotvec_to_matrix, skew
 from .base import CountingEnergy, Optimizer, OptimizerInputError, PoseSpace
 
 MIN_CORRESPONDENCES = 6  # below this an iteration cannot constrain a pose: stop instead of guessing
@@ -185,24 +185,13 @@ def vertex_jacobian(body, pose_abs, rest_vertices, weights, descendants=None) ->
         for i, axis, share in body.bone_dofs[b]:
             w = R @ (acc @ axis)
             # w x lever for every row, as one small matmul (np.cross's overhead was most of the local fit's)
-            J[:, :, i] += lever @ (share * _cross_matrix(w / math.sqrt(float(w @ w)))).T
-            acc = acc @ _axis_rotation(axis, x[i] * share)
+            J[:, :, i] += lever @ (share * skew(w / math.sqrt(float(w @ w)))).T
+            acc = acc @ axis_angle_matrix(axis, x[i] * share)
     J[:, :, body.translation_dofs] = Wd[:, r, None, None] * np.eye(3)
     lever = S[:, r] - Wd[:, r, None] * world[r, :3, 3]
     for k, i in enumerate(body.root_rotation_dofs):
-        J[:, :, i] = lever @ _cross_matrix(np.eye(3)[k]).T
+        J[:, :, i] = lever @ skew(np.eye(3)[k]).T
     return J
-
-
-def _cross_matrix(w):
-    """[w]x: the 3x3 matrix with [w]x v = w x v."""
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
-def _axis_rotation(axis, angle):
-    """Rodrigues' rotation about one unit axis (scalar angle), without the batched helper's overhead."""
-    k = _cross_matrix(axis)
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
 
 
 def projection_jacobian(camera: Camera, points, step: float = 1e-7) -> np.ndarray:
