@@ -6,7 +6,7 @@ the rest pose at the origin, unclothed colours as the subjects'.
 
 Like generate.py, this reads the shared data folder; the product does not.
 
-    .venv/bin/python sample_scenes/mixamo_character.py --data /work/shared/data [--out PATH]
+    .venv/bin/python sample_scenes/mixamo_character.py --data ../shared/data [--out PATH]
 """
 import argparse
 import sys
