@@ -21,29 +21,30 @@ TORSO_LANDMARKS = (11, 12, 23, 24)
 
 def triangulate(cameras, uv, weight, min_weight=MIN_WEIGHT):
     """DLT per point over the views where its weight passes: uv (C,K,2), weight (C,K) -> (K,3), ok (K,)."""
-    C, K = weight.shape
+    ideal = np.stack([cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)])
+    return _dlt(np.stack([cam.projection_matrix for cam in cameras]), ideal, weight, min_weight)
+
+
+def _dlt(P, ideal, weight, min_weight):
+    """All points' DLT systems in one batched SVD: P (C,3,4), ideal (undistorted) pixels (C,K,2), weight
+    (C,K). A view under min_weight contributes zero rows, which leave the solution (the null space of
+    A^T A) as it is without them."""
+    w = np.where(weight >= min_weight, weight, 0.0)  # (C,K)
+    u, v = ideal[..., 0], ideal[..., 1]
+    row_u = w[..., None] * (u[..., None] * P[:, None, 2] - P[:, None, 0])  # (C,K,4)
+    row_v = w[..., None] * (v[..., None] * P[:, None, 2] - P[:, None, 1])
+    A = np.concatenate([row_u, row_v], axis=0).transpose(1, 0, 2)  # (K,2C,4)
+    K = A.shape[0]
     X = np.full((K, 3), np.nan)
-    ok = np.zeros(K, bool)
-    Ps = [cam.projection_matrix for cam in cameras]
-    ideal = [cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)]
-    for k in range(K):
-        views = [c for c in range(C) if weight[c, k] >= min_weight]
-        if len(views) < 2:
-            continue
-        rows = []
-        for c in views:
-            u, v = ideal[c][k]
-            w = weight[c, k]
-            rows += [w * (u * Ps[c][2] - Ps[c][0]), w * (v * Ps[c][2] - Ps[c][1])]
-        _, _, vt = np.linalg.svd(np.array(rows))
-        h = vt[-1]
-        if abs(h[3]) > 1e-12:
-            X[k], ok[k] = h[:3] / h[3], True
+    ok = (weight >= min_weight).sum(axis=0) >= 2
+    if not ok.any():
+        return X, ok
+    h = np.linalg.svd(A[ok])[2][:, -1]  # (n,4)
+    finite = np.abs(h[:, 3]) > 1e-12
+    idx = np.nonzero(ok)[0]
+    X[idx[finite]] = h[finite, :3] / h[finite, 3:]
+    ok[idx[~finite]] = False
     return X, ok
-
-
-def _reprojection_error(cameras, views, X, uv):
-    return sum(float(np.linalg.norm(cameras[c].project(X[None])[0] - uv[c])) for c in views)
 
 
 def resolve_swaps(cameras, uv, weight, swap, max_views=10):
@@ -51,29 +52,32 @@ def resolve_swaps(cameras, uv, weight, swap, max_views=10):
     swap, the one whose triangulation reprojects best. Returns uv, weight with those views' pairs swapped."""
     uv, weight = uv.copy(), weight.copy()
     C = weight.shape[0]
+    P = np.stack([cam.projection_matrix for cam in cameras])
+    ideal = np.stack([cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)])  # once: swaps permute it
     for a, b in [(a, int(b)) for a, b in enumerate(swap) if a < b]:
         views = [c for c in range(C) if min(weight[c, a], weight[c, b]) >= MIN_WEIGHT]
         if len(views) < 3 or len(views) > max_views:  # two views cannot outvote each other
             continue
-        best, best_flip = np.inf, ()
-        for mask in range(1 << len(views)):
-            flip = [views[i] for i in range(len(views)) if mask >> i & 1]
-            if 2 * len(flip) >= len(views):
-                continue
-            trial_uv, trial_w = uv.copy(), weight.copy()
-            for c in flip:
-                trial_uv[c, [a, b]] = trial_uv[c, [b, a]]
-                trial_w[c, [a, b]] = trial_w[c, [b, a]]
-            X, ok = triangulate(cameras, trial_uv[:, [a, b]], trial_w[:, [a, b]])
-            if not ok.all():
-                continue
-            err = (_reprojection_error(cameras, views, X[0], trial_uv[:, a])
-                   + _reprojection_error(cameras, views, X[1], trial_uv[:, b]))
-            if err < best:
-                best, best_flip = err, flip
-        for c in best_flip:
+        flips = [[views[i] for i in range(len(views)) if mask >> i & 1] for mask in range(1 << len(views))]
+        flips = [flip for flip in flips if 2 * len(flip) < len(views)]
+        # Every trial's two points side by side: trial t's (a, b) are points 2t, 2t+1.
+        order = np.tile([a, b], (C, len(flips)))  # (C, 2T): the landmark each view sees as each point
+        for t, flip in enumerate(flips):
+            order[flip, 2 * t:2 * t + 2] = [b, a]
+        rows = np.arange(C)[:, None]
+        X, ok = _dlt(P, ideal[rows, order], weight[rows, order], MIN_WEIGHT)
+        good = ok.reshape(-1, 2).all(axis=1)
+        if not good.any():
+            continue
+        err = np.zeros(len(flips))
+        for c in views:
+            seen = np.where(ok[:, None], X, 0.0)
+            err += np.linalg.norm(cameras[c].project(seen) - uv[c, order[c]], axis=1).reshape(-1, 2).sum(axis=1)
+        err[~good] = np.inf
+        for c in flips[int(np.argmin(err))]:
             uv[c, [a, b]] = uv[c, [b, a]]
             weight[c, [a, b]] = weight[c, [b, a]]
+            ideal[c, [a, b]] = ideal[c, [b, a]]
     return uv, weight
 
 

@@ -249,6 +249,74 @@ def test_first_frame_from_keypoints_recovers_the_pose(walk_truth):
     assert error.mean() < 0.04
 
 
+def _triangulate_one_by_one(cameras, uv, weight, min_weight):
+    """Reference DLT: each point on its own, only the rows of the views whose weight passes."""
+    X, ok = np.full((uv.shape[1], 3), np.nan), np.zeros(uv.shape[1], bool)
+    for k in range(uv.shape[1]):
+        rows = []
+        for c, cam in enumerate(cameras):
+            if weight[c, k] >= min_weight:
+                (u, v), P = cam.undistort_points(uv[c, k]), cam.projection_matrix
+                rows += [weight[c, k] * (u * P[2] - P[0]), weight[c, k] * (v * P[2] - P[1])]
+        if len(rows) >= 4:
+            h = np.linalg.svd(np.array(rows))[2][-1]
+            X[k], ok[k] = h[:3] / h[3], True
+    return X, ok
+
+
+def _swaps_by_trying_each(cameras, uv, weight, swap, min_weight):
+    """Reference swap resolution: every minority of views flipped in turn, the pair triangulated one point at
+    a time, the flip set with the smallest reprojection error kept (the first of equals)."""
+    uv, weight = uv.copy(), weight.copy()
+    for a, b in [(a, int(b)) for a, b in enumerate(swap) if a < b]:
+        views = [c for c in range(len(cameras)) if min(weight[c, a], weight[c, b]) >= min_weight]
+        if len(views) < 3:
+            continue
+        best, best_flip = np.inf, []
+        for mask in range(1 << len(views)):
+            flip = [views[i] for i in range(len(views)) if mask >> i & 1]
+            if 2 * len(flip) >= len(views):
+                continue
+            tu, tw = uv[:, [a, b]].copy(), weight[:, [a, b]].copy()
+            tu[flip], tw[flip] = tu[flip][:, ::-1], tw[flip][:, ::-1]
+            X, ok = _triangulate_one_by_one(cameras, tu, tw, min_weight)
+            if ok.all():
+                err = sum(np.linalg.norm(cameras[c].project(X[i]) - tu[c, i]) for c in views for i in (0, 1))
+                if err < best:
+                    best, best_flip = err, flip
+        for c in best_flip:
+            uv[c, [a, b]], weight[c, [a, b]] = uv[c, [b, a]], weight[c, [b, a]]
+    return uv, weight
+
+
+def test_batched_triangulation_and_swaps_match_the_one_point_at_a_time_reference(walk_truth):
+    """keypoint_fit's batched DLT and swap search against the plain loops above, on landmarks with noise,
+    dropped detections and whole views whose sides are swapped: the same swaps, the same points (1e-9 m)."""
+    from markerless_mocap.core.keypoint_fit import MIN_WEIGHT, resolve_swaps, triangulate
+
+    body, poses, cameras, rig = walk_truth
+    rng = np.random.default_rng(3)
+    flipped_views = 0
+    for trial in range(12):
+        points = rig.world(body, poses[5 * trial][None])[0]
+        uv = np.stack([cam.project(points) for cam in cameras]) + rng.normal(0, 4.0, (len(cameras), len(points), 2))
+        shape = (len(cameras), len(points))
+        weight = np.where(rng.random(shape) < 0.15, 0.0, rng.uniform(0.3, 1.0, shape))
+        for c in range(len(cameras)):
+            if rng.random() < 0.3:
+                uv[c], weight[c] = uv[c, rig.swap], weight[c, rig.swap]
+                flipped_views += 1
+        got_uv, got_w = resolve_swaps(cameras, uv, weight, rig.swap)
+        want_uv, want_w = _swaps_by_trying_each(cameras, uv, weight, rig.swap, MIN_WEIGHT)
+        np.testing.assert_array_equal(got_uv, want_uv)
+        np.testing.assert_array_equal(got_w, want_w)
+        X, ok = triangulate(cameras, got_uv, got_w)
+        X_ref, ok_ref = _triangulate_one_by_one(cameras, got_uv, got_w, MIN_WEIGHT)
+        np.testing.assert_array_equal(ok, ok_ref)
+        np.testing.assert_allclose(X[ok], X_ref[ok], atol=1e-9)
+    assert flipped_views >= 5
+
+
 def test_icp_keypoint_gradient_matches_finite_differences(walk_truth):
     """The analytic keypoint block of ICP's normal equations: its gradient equals the numerical one of
     the keypoint cost (a Huber threshold wide enough that every residual is in its quadratic zone)."""
