@@ -451,6 +451,49 @@ def test_heatmap_alternatives_find_the_runner_up_peak():
     assert np.isnan(alt[0, 1]).all() and np.isnan(alt[1, 1]).all() and np.isnan(alt[2]).all()
 
 
+def _alternatives_one_landmark_at_a_time(heat, regressed, n, max_gap, min_distance):
+    """Reference second guesses: each heatmap's 3 x 3 local maxima near its top, refined by a parabola per
+    axis, away from the regressed point, the strongest n."""
+    out = np.full((len(heat), n, 3), np.nan)
+    cell = 256 / heat.shape[-1]
+    for lm, h in enumerate(heat):
+        peaks = np.argwhere((h == cv2.dilate(h, np.ones((3, 3), np.float32))) & (h >= h.max() - max_gap))
+        found = []
+        for r, c in peaks:
+            def step(lo, mid, hi):
+                curve = lo - 2 * mid + hi
+                return float(np.clip(0.5 * (lo - hi) / curve, -0.5, 0.5)) if curve < 0 else 0.0
+            up, down = h[max(r - 1, 0), c], h[min(r + 1, 63), c]
+            left, right = h[r, max(c - 1, 0)], h[r, min(c + 1, 63)]
+            uv = cell * np.array([c + 0.5 + step(left, h[r, c], right), r + 0.5 + step(up, h[r, c], down)])
+            if np.linalg.norm(uv - regressed[lm]) >= min_distance:
+                found.append((h.max() - h[r, c], uv))
+        for i, (gap, uv) in enumerate(sorted(found, key=lambda f: f[0])[:n]):
+            out[lm, i] = [uv[0], uv[1], gap]
+    return out
+
+
+def test_heatmap_alternatives_match_the_one_landmark_at_a_time_reference():
+    """The all-landmarks-at-once second guesses against the plain loop above, on smooth random heatmaps with
+    many peaks near the top (equal to 1e-6 crop pixels and logits)."""
+    from markerless_mocap.core.features.learned import (ALTERNATIVE_MAX_GAP, ALTERNATIVE_MIN_DISTANCE, ALTERNATIVES,
+                                                        heatmap_alternatives)
+
+    rng = np.random.default_rng(4)
+    found = 0
+    for _ in range(20):
+        noise = rng.normal(0, 1, (33, 64, 64)).astype(np.float32)
+        heat = np.stack([cv2.GaussianBlur(h, (0, 0), 3) * 20 for h in noise])
+        regressed = rng.uniform(0, 256, (33, 2))
+        got = heatmap_alternatives(heat, regressed)
+        want = _alternatives_one_landmark_at_a_time(heat, regressed, ALTERNATIVES, ALTERNATIVE_MAX_GAP,
+                                                    ALTERNATIVE_MIN_DISTANCE)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)], atol=1e-6)
+        found += int(np.isfinite(got[..., 2]).sum())
+    assert found > 50  # the heatmaps do have second guesses to compare
+
+
 def test_a_pose_on_a_second_guess_costs_little_more_than_on_the_landmark(walk_truth):
     """The left wrist's landmark regressed 60 px off (onto the other side of the body) in one view, with
     the true place as the heatmap's runner-up 0.4 logits down: the truth costs that view 0.1 more
