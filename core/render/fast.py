@@ -229,35 +229,48 @@ def _project_kernel(vertices, R, t, K, dist, has_dist, q, iz):
     for task in prange(P * C):
         p = task // C
         c = task % C
+        # The camera in locals: read from the arrays inside the vertex loop they were loaded again for every
+        # vertex (the compiler cannot tell that the writes to q and iz leave them alone).
+        r00, r01, r02, t0 = R[c, 0, 0], R[c, 0, 1], R[c, 0, 2], t[c, 0]
+        r10, r11, r12, t1 = R[c, 1, 0], R[c, 1, 1], R[c, 1, 2], t[c, 1]
+        r20, r21, r22, t2 = R[c, 2, 0], R[c, 2, 1], R[c, 2, 2], t[c, 2]
+        fx, skew, cx, fy, cy = K[c, 0, 0], K[c, 0, 1], K[c, 0, 2], K[c, 1, 1], K[c, 1, 2]
         k1, k2, p1, p2, k3, k4, k5, k6 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4], dist[c, 5], \
             dist[c, 6], dist[c, 7]
         s1, s2, s3, s4 = dist[c, 8], dist[c, 9], dist[c, 10], dist[c, 11]
+        distorted = has_dist[c]
+        rational = k4 != 0.0 or k5 != 0.0 or k6 != 0.0  # most calibrations have neither of these two parts
+        prism = s1 != 0.0 or s2 != 0.0 or s3 != 0.0 or s4 != 0.0
         for v in range(V):
             X, Y, Z = vertices[p, v, 0], vertices[p, v, 1], vertices[p, v, 2]
-            xc = R[c, 0, 0] * X + R[c, 0, 1] * Y + R[c, 0, 2] * Z + t[c, 0]
-            yc = R[c, 1, 0] * X + R[c, 1, 1] * Y + R[c, 1, 2] * Z + t[c, 1]
-            zc = R[c, 2, 0] * X + R[c, 2, 1] * Y + R[c, 2, 2] * Z + t[c, 2]
+            zc = r20 * X + r21 * Y + r22 * Z + t2
             if zc <= Z_NEAR:
                 iz[p, c, v] = 0.0
                 q[p, c, v, 0] = 0
                 q[p, c, v, 1] = 0
                 continue
-            x = xc / zc
-            y = yc / zc
-            if has_dist[c]:  # OpenCV's full model, as Camera.distort_normalized
+            inv_z = 1.0 / zc
+            x = (r00 * X + r01 * Y + r02 * Z + t0) * inv_z
+            y = (r10 * X + r11 * Y + r12 * Z + t1) * inv_z
+            if distorted:  # OpenCV's full model, as Camera.distort_normalized
                 r2 = x * x + y * y
-                r4 = r2 * r2
-                r6 = r4 * r2
-                radial = (1 + k1 * r2 + k2 * r4 + k3 * r6) / (1 + k4 * r2 + k5 * r4 + k6 * r6)
-                xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
-                yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+                radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+                if rational:
+                    radial /= 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+                xy2 = 2 * x * y
+                xd = x * radial + p1 * xy2 + p2 * (r2 + 2 * x * x)
+                yd = y * radial + p1 * (r2 + 2 * y * y) + p2 * xy2
+                if prism:
+                    r4 = r2 * r2
+                    xd += s1 * r2 + s2 * r4
+                    yd += s3 * r2 + s4 * r4
                 x, y = xd, yd
-            u = K[c, 0, 0] * x + K[c, 0, 1] * y + K[c, 0, 2]
-            w = K[c, 1, 1] * y + K[c, 1, 2]
+            u = fx * x + skew * y + cx
+            w = fy * y + cy
             if abs(u) <= MAX_COORD_PX and abs(w) <= MAX_COORD_PX:  # as reference.snap
                 q[p, c, v, 0] = int(np.rint(u * SUBPIXEL))
                 q[p, c, v, 1] = int(np.rint(w * SUBPIXEL))
-                iz[p, c, v] = 1.0 / zc
+                iz[p, c, v] = inv_z
             else:
                 q[p, c, v, 0] = 0
                 q[p, c, v, 1] = 0
