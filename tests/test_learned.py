@@ -195,6 +195,37 @@ def test_keypoint_term_prefers_the_truth_to_perturbations(walk_truth):
     assert (e[1:] > e[0]).mean() >= 0.97
 
 
+def test_fast_keypoint_term_matches_the_numpy_reference(walk_truth):
+    """core/fast_keypoints.py against keypoints.keypoint_energy_reference (1e-12): noisy landmarks with second
+    guesses, a view with its sides swapped, a view without landmarks, poses near and far from the truth."""
+    from markerless_mocap.core.features.learned import CROP_MARGIN, SWAP_ORDER
+    from markerless_mocap.core.fast_keypoints import keypoint_energy as fast
+    from markerless_mocap.core.keypoints import KEYPOINT_SIGMA, KeypointTargets, keypoint_energy_reference
+
+    body, poses, cameras, rig = walk_truth
+    rng = np.random.default_rng(8)
+    evidence = synthetic_evidence(body, poses[20], cameras, rig, noise_px=4.0)
+    evidence[1].keypoints = evidence[1].keypoints[SWAP_ORDER]
+    for ev in evidence:
+        ev.alternatives = np.concatenate([ev.keypoints[:, None] + rng.normal(0, 30, (33, 2, 2)),
+                                          rng.uniform(0, 3, (33, 2, 1))], axis=2)
+        ev.alternatives[rng.random((33, 2)) < 0.4] = np.nan  # landmarks without a second guess
+    targets = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN)
+    scale = np.where(np.isin(np.arange(body.n_dof), body.translation_dofs), 0.1, np.deg2rad(20.0))
+    trial = body.clamp(poses[20] + rng.normal(0, 1, (60, body.n_dof)) * scale)
+    pts = rig.world(body, trial)
+    projected = np.stack([c.project(pts.reshape(-1, 3)).reshape(pts.shape[:2] + (2,)) for c in cameras], axis=1)
+    want = keypoint_energy_reference(projected, targets, rig.swap)
+    assert np.ptp(want) > 0.1  # poses that the term tells apart
+    wide = 4 * KEYPOINT_SIGMA
+    np.testing.assert_allclose(fast(projected, targets, rig.swap, wide),
+                               keypoint_energy_reference(projected, targets, rig.swap, wide), atol=1e-12)
+    np.testing.assert_allclose(fast(projected, targets, rig.swap, KEYPOINT_SIGMA), want, atol=1e-12)
+    targets.weight[2] = 0.0  # a view that found nobody
+    np.testing.assert_allclose(fast(projected, targets, rig.swap, KEYPOINT_SIGMA),
+                               keypoint_energy_reference(projected, targets, rig.swap), atol=1e-12)
+
+
 def test_a_view_with_swapped_sides_does_not_pull_the_fit(walk_truth):
     from markerless_mocap.core.features.learned import SWAP_ORDER
 
