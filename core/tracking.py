@@ -116,6 +116,9 @@ class TrackingSettings:
     refine_scale: float | None = None
     # False: the local fit on the search's own silhouettes (refine_scale = the energy scale; the preview preset).
     fine_refine: bool = True
+    # Iterations of each local fit (None: IcpSettings' 10); its correspondence distance halves over them as
+    # over the default's (every 3 of 10 iterations).
+    refine_iterations: int | None = None
     # Observe frame t+1 (read, learned evidence, features) in a worker thread during frame t's local fit;
     # the same result either way.
     prefetch: bool = True
@@ -143,7 +146,7 @@ class TrackingSettings:
 # "Speed": its seconds per frame and accuracy on every sample scene).
 PRESETS = {
     "full": {},
-    "preview": {"particles": 50, "iterations": 4, "fine_refine": False},
+    "preview": {"particles": 50, "iterations": 4, "fine_refine": False, "refine_iterations": 6},
 }
 
 
@@ -597,7 +600,12 @@ class Tracker:
         from .optimizers.icp import IcpSettings, IcpSolver
 
         fine = self.fine_silhouettes is not None
-        settings = IcpSettings().at_resolution(self.refine_scale / self.scale) if fine else IcpSettings()
+        settings = IcpSettings()
+        if self.settings.refine_iterations is not None:
+            n = int(self.settings.refine_iterations)
+            settings = dataclasses.replace(settings, iterations=n,
+                                           shrink_every=max(1, round(settings.shrink_every * n / settings.iterations)))
+        settings = settings.at_resolution(self.refine_scale / self.scale) if fine else settings
         return IcpSolver(self._icp_problem(feats, fine), self.space, settings).fit(estimate).pose
 
     def _refine(self, feats, estimate):

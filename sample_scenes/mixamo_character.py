@@ -7,6 +7,14 @@ the rest pose at the origin, unclothed colours as the subjects'.
 Like generate.py, this reads the shared data folder; the product does not.
 
     .venv/bin/python sample_scenes/mixamo_character.py --data ../shared/data [--out PATH]
+
+bpy from PyPI saves as Blender 5.0, whose files Blender 4.2-4.4 cannot open. So, as for the subjects, the
+character is kept as plain data too and the committed .blend is built from it by the oldest real Blender at
+hand (tools/portable_subject.py):
+
+    .venv/bin/python tools/portable_subject.py dump sample_scenes/characters/mixamo.blend \
+        sample_scenes/characters/mixamo_source.json.gz
+    bash tests/real_blender/stage.sh --resave-subjects
 """
 import argparse
 import sys

@@ -1,4 +1,5 @@
-"""Run by the real-Blender stage: open every sample scene's subject.blend and say what is in it."""
+"""Run by the real-Blender stage: open every sample scene's subject.blend, and every character that receives
+the motion (sample_scenes/characters/*.blend), and say what is in it."""
 import sys
 from pathlib import Path
 
@@ -6,18 +7,23 @@ import bpy
 
 root = Path(sys.argv[sys.argv.index("--") + 1])
 failed = 0
-for path in sorted(root.glob("*/subject.blend")):
+# (file, label, bones expected: the subjects' CMU-named rig has 31; a character any number above 15)
+files = [(p, f"subject {p.parent.name}", 31) for p in sorted(root.glob("*/subject.blend"))]
+files += [(p, f"character {p.stem}", None) for p in sorted(root.glob("characters/*.blend"))]
+for path, label, n_bones in files:
     try:
         bpy.ops.wm.open_mainfile(filepath=str(path))
     except RuntimeError as exc:
-        print(f"STAGE subject {path.parent.name}: DOES NOT OPEN: {exc}")
+        print(f"STAGE {label}: DOES NOT OPEN: {exc}")
         failed += 1
         continue
     arms = [o for o in bpy.data.objects if o.type == "ARMATURE"]
     meshes = [o for o in bpy.data.objects if o.type == "MESH"]
-    ok = len(arms) == 1 and len(arms[0].data.bones) == 31 and len(meshes) == 1 and len(meshes[0].data.vertices) > 2000
+    bones = len(arms[0].data.bones) if arms else 0
+    ok = (len(arms) == 1 and (bones == n_bones if n_bones else bones > 15) and len(meshes) == 1
+          and len(meshes[0].data.vertices) > 2000)
     failed += not ok
-    print(f"STAGE subject {path.parent.name}: {'opens' if ok else 'WRONG CONTENT'} in Blender "
+    print(f"STAGE {label}: {'opens' if ok else 'WRONG CONTENT'} in Blender "
           f"{bpy.app.version_string} (saved by {'.'.join(map(str, bpy.data.version))}): "
-          f"{len(arms[0].data.bones) if arms else 0} bones, {len(meshes[0].data.vertices) if meshes else 0} vertices")
+          f"{bones} bones, {len(meshes[0].data.vertices) if meshes else 0} vertices")
 sys.exit(1 if failed else 0)

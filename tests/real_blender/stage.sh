@@ -6,8 +6,9 @@
 #   3. start the UI under Xvfb and drive Import, Check, Track (modal), Esc and Export; screenshots
 # Exit 0 = passed, 77 = skipped (cannot provision here; the reason is printed), anything else = failed.
 #   bash tests/real_blender/stage.sh [--provision-only | --resave-subjects]
-#   --resave-subjects: rebuild every sample_scenes/*/subject.blend from its subject_source.json.gz with
-#   this Blender 4.3.2, the oldest real Blender at hand (files it saves open in 4.2-5.2).
+#   --resave-subjects: rebuild every sample_scenes/*/subject.blend from its subject_source.json.gz, and
+#   sample_scenes/characters/NAME.blend from NAME_source.json.gz, with this Blender 4.3.2, the oldest real
+#   Blender at hand (files it saves open in 4.2-5.2).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/../.." && pwd)"
@@ -93,6 +94,14 @@ if [ "${1:-}" = "--resave-subjects" ]; then
     chroot "$root" blender -b --factory-startup --python-exit-code 1 --python "$src/tools/portable_subject.py" -- \
       build "$src/sample_scenes/$name/subject_source.json.gz" "$src/sample_scenes/$name/subject.blend" 2>&1 \
       | grep -E "portable_subject|Error" || { echo "resave of $name failed" >&2; exit 1; }
+  done
+  # the characters that receive the motion (sample_scenes/characters/NAME.blend from NAME_source.json.gz)
+  for source in "$repo"/sample_scenes/characters/*_source.json.gz; do
+    [ -f "$source" ] || continue
+    name="$(basename "$source" _source.json.gz)"
+    chroot "$root" blender -b --factory-startup --python-exit-code 1 --python "$src/tools/portable_subject.py" -- \
+      build "$src/sample_scenes/characters/${name}_source.json.gz" "$src/sample_scenes/characters/$name.blend" 2>&1 \
+      | grep -E "portable_subject|Error" || { echo "resave of character $name failed" >&2; exit 1; }
   done
   exit 0
 fi
