@@ -80,6 +80,9 @@ def _draw_calibration(box, props):
     box.label(text="Actor Calibration", icon="CON_SIZELIKE")
     box.prop(props, "calibrate_frames")
     box.operator("mocap.calibrate_actor", icon="MOD_ARMATURE")
+    if props.is_calibrating:
+        box.progress(factor=props.calibration_progress, type="BAR", text=props.calibration_status)
+        box.label(text="Esc to cancel", icon="CANCEL")
     box.prop(props, "actor_file")
     for line in props.actor_summary.splitlines():
         box.label(text=line)

@@ -126,6 +126,11 @@ class MocapSettings(bpy.types.PropertyGroup):
 
     # ---- run state (written by the Track operator)
     is_tracking: BoolProperty(name="Tracking", default=False)
+    # ... and by Calibrate Actor
+    is_calibrating: BoolProperty(name="Calibrating", default=False)
+    calibration_progress: FloatProperty(name="Calibration Progress", default=0.0, min=0.0, max=1.0,
+                                        subtype="FACTOR")
+    calibration_status: StringProperty(name="Calibration Status")
     progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR")
     status: StringProperty(name="Status")
     preparing: BoolProperty(name="Preparing", default=False,
@@ -164,6 +169,9 @@ def reset_run_state(_file=None):
     button would stay disabled for good."""
     for scene in bpy.data.scenes:
         props = getattr(scene, "mocap", None)
+        if props is not None and props.is_calibrating:
+            props.is_calibrating = False
+            props.calibration_status = ""
         if props is not None and props.is_tracking:
             props.is_tracking = False
             props.preparing = False

@@ -1,5 +1,8 @@
 """Calibrate the actor: track the first frames with the user's rig, fit the proportions to their landmarks,
 save actor.json. Shared by `calibrate`, `track --calibrate` and the Calibrate button (Subject panel)."""
+import queue
+import threading
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -18,20 +21,36 @@ def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames
     """Track `frames` (default: the first DEFAULT_FRAMES) with the rig into OUT/calibration_frames/, fit the
     proportions to the landmarks, then (silhouettes=True) refine them against the person masks of the same
     frames, write OUT/actor.json. Returns (ProportionsFit, path of actor.json)."""
-    from ..core.actor_file import save_actor
-    from ..core.proportions_fit import fit_proportions
+    session = open_calibration(scene, armature, capture_dir, out_dir, settings, frames, log, step)
+    fit = fit_calibration(session, log, progress, symmetric, silhouettes)
+    return fit, save_calibration(fit, out_dir, armature.name, capture_dir)
+
+
+def open_calibration(scene, armature, capture_dir, out_dir, settings=None, frames=None, log=None, step=None):
+    """Main thread (reads the rig from Blender): the session that tracks the calibration frames into
+    OUT/calibration_frames/ (default: the take's first DEFAULT_FRAMES)."""
     from .track_session import TrackSession
 
-    log = log or (lambda msg: None)
-    out_dir = Path(out_dir)
-    session = TrackSession(scene, armature, capture_dir, out_dir / "calibration_frames", settings, frames=frames,
-                           log=log, step=step)
+    session = TrackSession(scene, armature, capture_dir, Path(out_dir) / "calibration_frames", settings,
+                           frames=frames, log=log, step=step)
     if frames is None:  # the first frames of the take
         session.all_frames = session.frames = calibration_frames(session.all_frames)
+    return session
+
+
+def fit_calibration(session, log=None, progress=None, symmetric=True, silhouettes=True):
+    """Any thread (no bpy): track the session's frames (not keyed: the rig keeps the user's animation), fit the
+    proportions to their landmarks, refine them against the person masks; closes the capture. Returns the
+    ProportionsFit, or None when the session was cancelled first."""
+    from ..core.proportions_fit import fit_proportions
+
+    log = log or (lambda msg: None)
     try:
         progress = progress or (lambda est: log(f"calibration: frame {est.frame} solved"))
-        while (est := session.solve_next()) is not None:  # not keyed: the rig keeps the user's animation
+        while (est := session.solve_next()) is not None:
             progress(est)
+        if getattr(session, "cancelled", False):
+            return None
         est = session.writer.estimates
         if not est or est[0].landmarks is None:
             raise ValueError("calibration needs the learned landmarks: track with a likelihood that has 'kp' "
@@ -48,8 +67,80 @@ def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames
             fit = refine_fit(fit, session.character, session.tracker, landmarks[used], visibility[used], log=log)
     finally:
         session.capture.close()
-    path = save_actor(out_dir / "actor.json", fit, subject_name=armature.name, capture=Path(capture_dir).resolve())
-    return fit, path
+    return fit
+
+
+def save_calibration(fit, out_dir, subject_name, capture_dir):
+    """OUT/actor.json of the fit; returns its path."""
+    from ..core.actor_file import save_actor
+
+    return save_actor(Path(out_dir) / "actor.json", fit, subject_name=subject_name,
+                      capture=Path(capture_dir).resolve())
+
+
+class CalibrationJob:
+    """The Calibrate button's run in a worker thread, as TrackJob runs Track: the worker only calls
+    fit_calibration and puts plain messages on a queue; the operator's timer drains it on the main thread.
+    Esc cancels after the frame being solved; nothing is saved then."""
+
+    def __init__(self, session, n_frames):
+        self.session, self.n_frames = session, int(n_frames)
+        self.queue = queue.Queue()
+        self.solved = 0
+        self.status = "starting"
+        self.fit = None
+        self.error = None  # (message, traceback)
+        self.done = False
+        self.cancelled = False
+        self.thread = None
+
+    def start(self):
+        self.thread = threading.Thread(target=self._work, name="mocap-calibrate", daemon=True)
+        self.thread.start()
+
+    def _work(self):
+        try:
+            fit = fit_calibration(self.session, log=lambda msg: self.queue.put(("status", str(msg))),
+                                  progress=lambda est: self.queue.put(("frame", est.frame)))
+            self.queue.put(("fit", fit))
+        except (ValueError, OSError) as exc:  # bad input: the message names the problem and the fix
+            self.queue.put(("error", str(exc), ""))
+        except Exception as exc:  # noqa: BLE001  (reported on the main thread, with the traceback)
+            self.queue.put(("error", f"Calibration failed unexpectedly ({type(exc).__name__}: {exc}); see the "
+                                     "system console and report it", traceback.format_exc()))
+        finally:
+            self.queue.put(("done", None))
+
+    def drain(self):
+        while True:
+            try:
+                kind, *payload = self.queue.get_nowait()
+            except queue.Empty:
+                return
+            if kind == "frame":
+                self.solved += 1
+                self.status = f"frame {self.solved} of {self.n_frames} solved"
+            elif kind == "status":
+                self.status = payload[0].removeprefix("calibration: ")  # shown under "Calibrating: " already
+            elif kind == "fit":
+                self.fit = payload[0]
+            elif kind == "error":
+                self.error = (payload[0], payload[1])
+            elif kind == "done":
+                self.done = True
+
+    @property
+    def fraction(self):
+        return min(1.0, self.solved / self.n_frames) if self.n_frames else 0.0
+
+    def request_cancel(self):
+        self.cancelled = True
+        self.session.cancel()
+
+    def wait(self):
+        if self.thread is not None:
+            self.thread.join()
+        self.drain()
 
 
 def describe(fit):

@@ -24,39 +24,136 @@ def show_calibration(props, actor_path, lines):
 class MOCAP_OT_calibrate_actor(bpy.types.Operator):
     """Fit the actor's height and segment lengths to the first frames of the capture (tracks them with the rig,
     fits the proportions to the learned landmarks, then the forearm and hip width to the person masks); saved as
-    actor.json in the output folder"""
+    actor.json in the output folder (Esc to cancel)"""
 
     bl_idname = "mocap.calibrate_actor"
     bl_label = "Calibrate Actor"
     bl_options = {"REGISTER"}
 
-    def execute(self, context):
-        from ..core.proportions_fit import ProportionsFitError
-        from .actor_calibration import calibrate_actor, describe
+    @classmethod
+    def poll(cls, context):
+        props = context.scene.mocap if context.scene is not None else None
+        return props is not None and not props.is_tracking and not props.is_calibrating
+
+    def _inputs(self, context):
         from .setup_subject import subject_armature
         from .track import TrackSetupError, output_folder, run_settings
 
         props = context.scene.mocap
-        try:
-            if not props.capture_dir:
-                raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
-            armature = subject_armature(context)
-            settings, _ = run_settings(context)
-            fit, path = calibrate_actor(context.scene, armature, Path(bpy.path.abspath(props.capture_dir)),
-                                        output_folder(context), settings, frames=_calibration_frames(props))
-        except (ValueError, ProportionsFitError, FileNotFoundError, OSError) as exc:
-            props.last_error = str(exc)
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        except Exception as exc:
-            traceback.print_exc()
-            self.report({"ERROR"}, f"Calibration failed unexpectedly ({type(exc).__name__}: {exc}); "
-                                   "see the system console and report it")
-            return {"CANCELLED"}
+        if not props.capture_dir:
+            raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
+        armature = subject_armature(context)
+        settings, _ = run_settings(context)
+        return armature, Path(bpy.path.abspath(props.capture_dir)), output_folder(context), settings
+
+    def _fail(self, context, message):
+        context.scene.mocap.last_error = message
+        self.report({"ERROR"}, message)
+        return {"CANCELLED"}
+
+    def _show_result(self, context, fit, path):
+        from .actor_calibration import describe
+
         lines = describe(fit)
-        show_calibration(props, path, lines)
+        show_calibration(context.scene.mocap, path, lines)
         self.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
         return {"FINISHED"}
+
+    # ---- synchronous: background mode, scripts, tests, the GPU backend (bpy's gpu works on the main thread only)
+    def execute(self, context):
+        from ..core.proportions_fit import ProportionsFitError
+        from .actor_calibration import calibrate_actor
+
+        props = context.scene.mocap
+        try:
+            armature, capture_dir, out_dir, settings = self._inputs(context)
+            fit, path = calibrate_actor(context.scene, armature, capture_dir, out_dir, settings,
+                                        frames=_calibration_frames(props))
+        except (ValueError, ProportionsFitError, FileNotFoundError, OSError) as exc:
+            return self._fail(context, str(exc))
+        except Exception as exc:
+            traceback.print_exc()
+            return self._fail(context, f"Calibration failed unexpectedly ({type(exc).__name__}: {exc}); "
+                                       "see the system console and report it")
+        return self._show_result(context, fit, path)
+
+    # ---- modal: the UI stays responsive while the worker tracks the calibration frames and fits
+    def invoke(self, context, _event):
+        from .actor_calibration import CalibrationJob, open_calibration
+
+        if context.window is None:
+            return self.execute(context)
+        props = context.scene.mocap
+        try:
+            armature, capture_dir, out_dir, settings = self._inputs(context)
+            if settings.backend == "gpu":
+                return self.execute(context)
+            frames = _calibration_frames(props)
+            session = open_calibration(context.scene, armature, capture_dir, out_dir, settings, frames=frames)
+        except (ValueError, FileNotFoundError, OSError) as exc:
+            return self._fail(context, str(exc))
+        except Exception as exc:
+            traceback.print_exc()
+            return self._fail(context, f"Could not start the calibration ({type(exc).__name__}: {exc}); "
+                                       "see the system console")
+        self._job = CalibrationJob(session, len(session.frames))
+        self._save_args = (out_dir, armature.name, capture_dir)
+        props.last_error = ""
+        props.is_calibrating = True
+        props.calibration_status = "Calibrating: starting"
+        self._job.start()
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.2, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
+            job.request_cancel()
+        elif event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        job.drain()
+        props = context.scene.mocap
+        props.calibration_progress = job.fraction
+        props.calibration_status = ("Calibrating: cancelling after the current frame" if job.cancelled
+                                    else f"Calibrating: {job.status}")
+        if context.workspace is not None:
+            context.workspace.status_text_set(f"{props.calibration_status}  (Esc to cancel)")
+        for area in (context.screen.areas if context.screen else ()):
+            if area.type in {"VIEW_3D", "PROPERTIES"}:
+                area.tag_redraw()
+        return self._end(context) if job.done else {"RUNNING_MODAL"}
+
+    def _end(self, context):
+        from .actor_calibration import save_calibration
+
+        job = self._job
+        context.window_manager.event_timer_remove(self._timer)
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        props = context.scene.mocap
+        props.is_calibrating = False
+        props.calibration_status = ""
+        if job.error is not None:
+            if job.error[1]:
+                print(job.error[1])
+            return self._fail(context, job.error[0])
+        if job.fit is None:  # cancelled before the fit
+            self.report({"WARNING"}, f"Calibration cancelled after {job.solved} frames; nothing saved")
+            return {"CANCELLED"}
+        try:
+            path = save_calibration(job.fit, *self._save_args)
+        except OSError as exc:
+            return self._fail(context, f"could not save the calibration: {exc}")
+        return self._show_result(context, job.fit, path)
+
+    def cancel(self, context):
+        """Blender ends the operator (file loaded, window closed): stop the worker, save nothing."""
+        self._job.request_cancel()
+        self._job.wait()
+        context.window_manager.event_timer_remove(self._timer)
+        context.scene.mocap.is_calibrating = False
 
 
 class MOCAP_OT_apply_actor_copy(bpy.types.Operator):

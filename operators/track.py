@@ -271,7 +271,8 @@ class MOCAP_OT_track(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.scene is not None and not context.scene.mocap.is_tracking
+        props = context.scene.mocap if context.scene is not None else None
+        return props is not None and not props.is_tracking and not props.is_calibrating  # one engine run at a time
 
     # ---- shared
     def _begin(self, context):

@@ -3,7 +3,7 @@
     blender SUBJECT.blend --enable-event-simulate --python drive_ui.py -- CAPTURE OUT
 
 Drives the Mocap sidebar the way a user would, through operators and timers: Import the capture, Check
-the rig, Track (the modal operator, a few frames), Esc to cancel (a simulated key press, as a user's
+the rig, Calibrate Actor (modal, 3 frames), Track (the modal operator, a few frames, with the calibration), Esc to cancel (a simulated key press, as a user's
 would arrive), then Export FBX and BVH. Takes a screenshot at each step into OUT, writes OUT/ui_report.json
 and quits; the stage checks the report. Everything here runs on Blender's main thread (timers).
 """
@@ -138,7 +138,43 @@ def step_check():
     m = props()
     report["check"] = {"result": sorted(result), "dofs": m.subject_dofs, "preset": m.subject_preset}
     log(f"Check rig: {sorted(result)}, {m.subject_dofs} DOF, preset {m.subject_preset}")
-    bpy.app.timers.register(step_track, first_interval=1.0)
+    bpy.app.timers.register(step_calibrate, first_interval=1.0)
+
+
+@guarded
+def step_calibrate():
+    """Calibrate Actor on 3 frames (the modal operator): the UI keeps ticking, the fitted height shows."""
+    m = props()
+    m.calibrate_frames = 3
+    with override():
+        result = bpy.ops.mocap.calibrate_actor("INVOKE_DEFAULT")
+    report["calibrate"] = {"invoke": sorted(result), "status_lines": [], "ticks": 0}
+    log(f"Calibrate invoked: {sorted(result)}")
+    state["calibrate_started"] = time.perf_counter()
+    bpy.app.timers.register(step_watch_calibration, first_interval=0.2)
+
+
+@guarded
+def step_watch_calibration():
+    m = props()
+    cal = report["calibrate"]
+    cal["ticks"] += 1
+    if m.calibration_status and (not cal["status_lines"] or cal["status_lines"][-1] != m.calibration_status):
+        cal["status_lines"].append(m.calibration_status)
+        log(f"calibration status: {m.calibration_status}")
+    if state.get("shoot_calibrating") and "03_calibrating.png" not in report["screenshots"]:
+        screenshot("03_calibrating")  # a tick after the first frame's line: the sidebar has redrawn with it
+    state["shoot_calibrating"] = m.calibration_status.startswith("Calibrating: frame")
+    if m.is_calibrating:
+        if time.perf_counter() - state["calibrate_started"] > 240:
+            raise TimeoutError("the calibration did not finish within 240 s")
+        return 0.2
+    cal.update(summary=m.actor_summary.splitlines(), actor_file=m.actor_file, use_actor=m.use_actor,
+               error=m.last_error, seconds=round(time.perf_counter() - state["calibrate_started"], 1))
+    log(f"calibrated in {cal['seconds']} s: {cal['summary'][:1]} {m.last_error}")
+    screenshot("03_calibrated")
+    bpy.app.timers.register(step_track, first_interval=0.5)
+    return None
 
 
 @guarded

@@ -3,7 +3,8 @@
 #   1. provision the chroot once (cached under $MOCAP_STAGE_CACHE, default /var/cache/markerless_mocap)
 #   2. enable the add-on from this checkout, run `blender -b SUBJECT --command markerless_mocap track`
 #      on a sample scene (few frames, small budget) and check every result file
-#   3. start the UI under Xvfb and drive Import, Check, Track (modal), Esc and Export; screenshots
+#   3. start the UI under Xvfb and drive Import, Check, Calibrate Actor and Track (modal), Esc and Export;
+#      screenshots
 # Exit 0 = passed, 77 = skipped (cannot provision here; the reason is printed), anything else = failed.
 #   bash tests/real_blender/stage.sh [--provision-only | --resave-subjects]
 #   --resave-subjects: rebuild every sample_scenes/*/subject.blend from its subject_source.json.gz, and
@@ -179,7 +180,7 @@ diff <(cd "$out/command_result" && find . -type f | sort) <(cd "$out/module_resu
   > "$out/files.diff" || fail "--command and python -m wrote different files; see $out/files.diff"
 log "--command run wrote every result file: ${expected[*]} (the same set as python -m markerless_mocap track)"
 
-# 5. the UI under Xvfb: Import, Check, Track (modal), Esc, Export, with screenshots
+# 5. the UI under Xvfb: Import, Check, Calibrate Actor (modal), Track (modal), Esc, Export, with screenshots
 rm -f "$out/xvfb.display"
 chroot "$root" Xvfb -displayfd 1 -screen 0 1600x1200x24 -nolisten tcp > "$out/xvfb.display" 2> "$out/xvfb.log" &
 xvfb_pid=$!
@@ -187,7 +188,7 @@ trap 'kill "$xvfb_pid" 2>/dev/null || true; cleanup' EXIT
 for _ in $(seq 50); do [ -s "$out/xvfb.display" ] && break; sleep 0.2; done
 display="$(head -1 "$out/xvfb.display")"
 [ -n "$display" ] || fail "Xvfb did not start; see $out/xvfb.log"
-log "UI on Xvfb :$display: Import, Check, Track (modal), Esc, Export"
+log "UI on Xvfb :$display: Import, Check, Calibrate, Track (modal), Esc, Export"
 t1=$(date +%s)
 timeout 420 chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURCES=/mnt/out/blender_user \
   PYTHONDONTWRITEBYTECODE=1 NUMBA_CACHE_DIR=/var/cache/mocap-numba MOCAP_CACHE_DIR=/var/cache/mocap-motion \
@@ -207,6 +208,12 @@ check(r.get("import", {}).get("result") == ["FINISHED"] and len(r["import"]["cam
 check(r.get("check", {}).get("dofs") == 30, "Check rig: 30 DOF")
 check(r.get("preset") == {"name": "preview", "budget": [50, 4], "local_fit_fine": False},
       f"the Preview preset: {r.get('preset')}")
+cal = r.get("calibrate", {})
+check(cal.get("invoke") == ["RUNNING_MODAL"], f"Calibrate Actor did not run modal: {cal.get('invoke')}")
+check(bool(cal.get("summary")) and cal["summary"][0].startswith("height ") and cal.get("use_actor"),
+      f"no calibrated height shown: {cal.get('summary')} {cal.get('error')!r}")
+check(any(l.startswith("Calibrating: frame ") for l in cal.get("status_lines", [])), "no calibration progress line")
+check(cal.get("ticks", 0) >= 5, f"the UI timer ticked {cal.get('ticks')} times while calibrating")
 check(r.get("track_invoke") == ["RUNNING_MODAL"], "Track did not run modal")
 cancel = r.get("cancel", {})
 check(cancel.get("status", "").startswith("Cancelled after"), f"cancel status {cancel.get('status')!r}")
@@ -222,10 +229,10 @@ check(not any(" - " in l for l in lines if l.startswith("Frame ")), "a message s
 check(r.get("max_ui_gap_s") is not None and r["max_ui_gap_s"] < 5, f"UI stalled {r.get('max_ui_gap_s')} s while tracking")
 e = r.get("export", {})
 check(e.get("fbx") == ["FINISHED"] and e.get("bvh") == ["FINISHED"] and e.get("fbx_bytes", 0) > 0 and e.get("bvh_bytes", 0) > 0, "Export")
-check(len(r.get("screenshots", [])) == 5, "screenshots")
+check(len(r.get("screenshots", [])) == 7, f"screenshots: {r.get('screenshots')}")
 if problems:
     print("\n".join("[stage-ui] FAILED: " + p for p in problems)); sys.exit(1)
-print(f"[stage-ui] passed: {len(lines)} status lines, {r['timer_ticks_while_tracking']} UI timer ticks while tracking "
+print(f"[stage-ui] passed: calibrated in {cal.get('seconds')} s ({cal['summary'][0]}), {len(lines)} status lines, {r['timer_ticks_while_tracking']} UI timer ticks while tracking "
       f"(longest gap {r['max_ui_gap_s']} s), cancelled with {len(cancel['keyed_frames'])} frames keyed, screenshots in ui/")
 PY
 log "real-Blender stage PASSED in $(( $(date +%s) - t0 )) s (logs and screenshots: $out)"
