@@ -5,6 +5,8 @@ from pathlib import Path
 
 import bpy
 
+from .modal_run import begin_modal, end_modal, is_cancel_key, show_status
+
 
 def _calibration_frames(props):
     """The first `calibrate_frames` frames of the range the Track panel tracks."""
@@ -102,14 +104,11 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         props.is_calibrating = True
         props.calibration_status = "Calibrating: starting"
         self._job.start()
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.2, window=context.window)
-        wm.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return begin_modal(self, context, 0.2)
 
     def modal(self, context, event):
         job = self._job
-        if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
+        if is_cancel_key(event):
             job.request_cancel()
         elif event.type != "TIMER":
             return {"PASS_THROUGH"}
@@ -118,20 +117,14 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         props.calibration_progress = job.fraction
         props.calibration_status = ("Calibrating: cancelling after the current frame" if job.cancelled
                                     else f"Calibrating: {job.status}")
-        if context.workspace is not None:
-            context.workspace.status_text_set(f"{props.calibration_status}  (Esc to cancel)")
-        for area in (context.screen.areas if context.screen else ()):
-            if area.type in {"VIEW_3D", "PROPERTIES"}:
-                area.tag_redraw()
+        show_status(context, props.calibration_status)
         return self._end(context) if job.done else {"RUNNING_MODAL"}
 
     def _end(self, context):
         from .actor_calibration import save_calibration
 
         job = self._job
-        context.window_manager.event_timer_remove(self._timer)
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
+        end_modal(self, context)
         props = context.scene.mocap
         props.is_calibrating = False
         props.calibration_status = ""
@@ -152,7 +145,7 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         """Blender ends the operator (file loaded, window closed): stop the worker, save nothing."""
         self._job.request_cancel()
         self._job.wait()
-        context.window_manager.event_timer_remove(self._timer)
+        end_modal(self, context)
         context.scene.mocap.is_calibrating = False
 
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import bpy
 
+from .modal_run import begin_modal, end_modal, is_cancel_key, show_status
+
 # The real class lives in track_session.py, which pulls in the whole engine: it is imported on first
 # use so that enabling the add-on stays fast. Tests replace this name with a fake session.
 TrackSession = None
@@ -375,14 +377,11 @@ class MOCAP_OT_track(bpy.types.Operator):
             return self._run_foreground(context, job, session)
         self._job = job
         job.start(session)
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return begin_modal(self, context, 0.1)
 
     def modal(self, context, event):
         job = self._job
-        if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
+        if is_cancel_key(event):
             job.request_cancel()
             self._refresh(context, job)
             return {"RUNNING_MODAL"}
@@ -402,16 +401,10 @@ class MOCAP_OT_track(bpy.types.Operator):
 
     def _refresh(self, context, job):
         self._show(context, job)
-        if context.workspace is not None:
-            context.workspace.status_text_set(f"{context.scene.mocap.status}  (Esc to cancel)")
-        for area in (context.screen.areas if context.screen else ()):
-            if area.type in {"VIEW_3D", "PROPERTIES"}:
-                area.tag_redraw()
+        show_status(context, context.scene.mocap.status)
 
     def _cleanup(self, context):
-        context.window_manager.event_timer_remove(self._timer)
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
+        end_modal(self, context)
 
     def cancel(self, context):
         """Blender ends the operator (file loaded, window closed): stop the worker, keep the keys and
