@@ -141,17 +141,22 @@ def step_check():
     bpy.app.timers.register(step_calibrate, first_interval=1.0)
 
 
+def invoke_modal(operator, name, started_key, watcher):
+    """Invoke a modal operator as a click does, note when, and watch it every 0.2 s; returns its result."""
+    with override():
+        result = sorted(operator("INVOKE_DEFAULT"))
+    log(f"{name} invoked: {result}")
+    state[started_key] = time.perf_counter()
+    bpy.app.timers.register(watcher, first_interval=0.2)
+    return result
+
+
 @guarded
 def step_calibrate():
     """Calibrate Actor on 3 frames (the modal operator): the UI keeps ticking, the fitted height shows."""
-    m = props()
-    m.calibrate_frames = 3
-    with override():
-        result = bpy.ops.mocap.calibrate_actor("INVOKE_DEFAULT")
-    report["calibrate"] = {"invoke": sorted(result), "status_lines": [], "ticks": 0}
-    log(f"Calibrate invoked: {sorted(result)}")
-    state["calibrate_started"] = time.perf_counter()
-    bpy.app.timers.register(step_watch_calibration, first_interval=0.2)
+    props().calibrate_frames = 3
+    result = invoke_modal(bpy.ops.mocap.calibrate_actor, "Calibrate", "calibrate_started", step_watch_calibration)
+    report["calibrate"] = {"invoke": result, "status_lines": [], "ticks": 0}
 
 
 @guarded
@@ -180,12 +185,7 @@ def step_watch_calibration():
 @guarded
 def step_track():
     screenshot("02_checked")
-    with override():
-        result = bpy.ops.mocap.track("INVOKE_DEFAULT")
-    report["track_invoke"] = sorted(result)
-    log(f"Track invoked: {sorted(result)}")
-    state["track_started"] = time.perf_counter()
-    bpy.app.timers.register(step_watch, first_interval=0.2)
+    report["track_invoke"] = invoke_modal(bpy.ops.mocap.track, "Track", "track_started", step_watch)
 
 
 @guarded
