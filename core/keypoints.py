@@ -199,34 +199,29 @@ class KeypointTargets:
         return cls(uv, weight, size, alt_uv, alt_cost)
 
 
-def _candidate_costs(projected, targets, order, sigma, with_best=True):
+def _candidate_costs(projected, targets, order, sigma):
     """(P,C,K) rho of each projected rig point against landmark order[k] (weights included): the cheapest
-    of that landmark's candidates, and which candidate it was (None unless with_best)."""
+    of that landmark's candidates, and which candidate it was."""
     uv, extra = targets.candidates()
     uv, extra, w = uv[:, order], extra[:, order], targets.weight[:, order]
-    diff = projected[:, :, :, None] - uv[None]                                 # (P,C,K,1+A,2)
-    d2 = diff[..., 0] ** 2 + diff[..., 1] ** 2
-    d2 *= (1.0 / (sigma * targets.person_px[None, :, None, None])) ** 2
-    rho = np.minimum(d2 / (d2 + 1) + extra[None], 1.0)
-    if not with_best:
-        return w[None] * rho.min(axis=-1), None
+    d2 = np.sum((projected[:, :, :, None] - uv[None]) ** 2, axis=-1)          # (P,C,K,1+A)
+    r2 = (1.0 / (sigma * targets.person_px[None, :, None, None])) ** 2
+    rho = np.minimum(d2 * r2 / (d2 * r2 + 1) + extra[None], 1.0)
     best = np.argmin(rho, axis=-1)
     return w[None] * np.take_along_axis(rho, best[..., None], axis=-1)[..., 0], best
 
 
-def assigned_costs(projected, targets, swap, sigma=KEYPOINT_SIGMA, with_best=True):
+def assigned_costs(projected, targets, swap, sigma=KEYPOINT_SIGMA):
     """Per point (P,C,K): its weighted rho, whether its view's left/right pair is taken the other way round,
-    and which candidate of the landmark it matched (0: the regressed point; None unless with_best). Each pair
-    is assigned the way that costs less (single-view detectors swap sides), each landmark's cheapest
-    candidate counted."""
+    and which candidate of the landmark it matched (0: the regressed point). Each pair is assigned the way
+    that costs less (single-view detectors swap sides), each landmark's cheapest candidate counted."""
     K = projected.shape[2]
-    rho_same, best_same = _candidate_costs(projected, targets, np.arange(K), sigma, with_best)
-    rho_swap, best_swap = _candidate_costs(projected, targets, swap, sigma, with_best)
+    rho_same, best_same = _candidate_costs(projected, targets, np.arange(K), sigma)
+    rho_swap, best_swap = _candidate_costs(projected, targets, swap, sigma)
     pair_same = rho_same + rho_same[:, :, swap]  # a pair's cost under each assignment
     pair_swap = rho_swap + rho_swap[:, :, swap]
     flip = pair_swap < pair_same
-    chosen = np.where(flip, best_swap, best_same) if with_best else None
-    return np.where(flip, rho_swap, rho_same), flip, chosen
+    return np.where(flip, rho_swap, rho_same), flip, np.where(flip, best_swap, best_same)
 
 
 def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA):
@@ -253,7 +248,7 @@ def keypoint_energy_reference(projected, targets, swap, sigma=KEYPOINT_SIGMA):
     guesses at their extra cost) fits better. Views without landmarks are left out; the mean is over the
     views that have some.
     """
-    per_point, _, _ = assigned_costs(projected, targets, swap, sigma, with_best=False)
+    per_point, _, _ = assigned_costs(projected, targets, swap, sigma)
     w = targets.weight
     total_w = w.sum(axis=1)  # swapping permutes the weights within pairs: same total
     seen = total_w > 1e-6
