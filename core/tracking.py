@@ -602,9 +602,7 @@ class Tracker:
         fine = self.fine_silhouettes is not None
         settings = IcpSettings()
         if self.settings.refine_iterations is not None:
-            n = int(self.settings.refine_iterations)
-            settings = dataclasses.replace(settings, iterations=n,
-                                           shrink_every=max(1, round(settings.shrink_every * n / settings.iterations)))
+            settings = settings.with_iterations(self.settings.refine_iterations)
         settings = settings.at_resolution(self.refine_scale / self.scale) if fine else settings
         return IcpSolver(self._icp_problem(feats, fine), self.space, settings).fit(estimate).pose
 

@@ -500,3 +500,13 @@ def test_icp_on_finer_silhouettes_with_settings_at_that_resolution(subject):
     assert np.mean(after_coarse) < 0.6 * np.mean(before)
     assert np.mean(after_fine) <= np.mean(after_coarse) + 1.0
     assert IcpSettings().at_resolution(1.0) == IcpSettings()
+
+
+def test_a_shorter_local_fit_halves_its_correspondence_distance_as_often_in_proportion():
+    """The preview preset's 6 iterations: 20, 20, 10, 10, 5, 5 px, as the default's 10 go 20 x3, 10 x3, 5 x4."""
+    from markerless_mocap.core.optimizers.icp import IcpSettings
+
+    default = IcpSettings()
+    assert default.with_iterations(default.iterations) == default
+    short = default.with_iterations(6)
+    assert [short.d_max_at(i) for i in range(short.iterations)] == [20.0, 20.0, 10.0, 10.0, 5.0, 5.0]

@@ -291,6 +291,12 @@ class IcpSettings:
                                    huber=self.huber * factor, keypoint_huber=self.keypoint_huber * factor,
                                    prior_weight=self.prior_weight * factor ** 2)
 
+    def with_iterations(self, n: int) -> "IcpSettings":
+        """The same schedule over `n` iterations: the correspondence distance halves as often, in proportion."""
+        n = int(n)
+        return dataclasses.replace(self, iterations=n,
+                                   shrink_every=max(1, round(self.shrink_every * n / self.iterations)))
+
     def d_max_at(self, it: int) -> float:
         return max(self.d_min, self.d_max * 0.5 ** (it // self.shrink_every))
 
