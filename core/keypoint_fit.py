@@ -21,8 +21,13 @@ TORSO_LANDMARKS = (11, 12, 23, 24)
 
 def triangulate(cameras, uv, weight, min_weight=MIN_WEIGHT):
     """DLT per point over the views where its weight passes: uv (C,K,2), weight (C,K) -> (K,3), ok (K,)."""
-    ideal = np.stack([cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)])
-    return _dlt(np.stack([cam.projection_matrix for cam in cameras]), ideal, weight, min_weight)
+    return _dlt(*_projections_and_ideal(cameras, uv), weight, min_weight)
+
+
+def _projections_and_ideal(cameras, uv):
+    """(C,3,4) projection matrices and the (C,K,2) pixels an ideal (distortion-free) camera sees."""
+    return (np.stack([cam.projection_matrix for cam in cameras]),
+            np.stack([cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)]))
 
 
 def _dlt(P, ideal, weight, min_weight):
@@ -50,10 +55,14 @@ def _dlt(P, ideal, weight, min_weight):
 def resolve_swaps(cameras, uv, weight, swap, max_views=10):
     """Per left/right pair, the views whose sides are swapped: of every choice of a minority of views to
     swap, the one whose triangulation reprojects best. Returns uv, weight with those views' pairs swapped."""
+    return _resolve_swaps(cameras, uv, weight, swap, max_views)[:2]
+
+
+def _resolve_swaps(cameras, uv, weight, swap, max_views=10):
+    """resolve_swaps, also returning the projection matrices and the ideal pixels (swapped alike) it used."""
     uv, weight = uv.copy(), weight.copy()
     C = weight.shape[0]
-    P = np.stack([cam.projection_matrix for cam in cameras])
-    ideal = np.stack([cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)])  # once: swaps permute it
+    P, ideal = _projections_and_ideal(cameras, uv)  # once: swaps permute the points, each undistorted alone
     for a, b in [(a, int(b)) for a, b in enumerate(swap) if a < b]:
         views = [c for c in range(C) if min(weight[c, a], weight[c, b]) >= MIN_WEIGHT]
         if len(views) < 3 or len(views) > max_views:  # two views cannot outvote each other
@@ -78,7 +87,7 @@ def resolve_swaps(cameras, uv, weight, swap, max_views=10):
             uv[c, [a, b]] = uv[c, [b, a]]
             weight[c, [a, b]] = weight[c, [b, a]]
             ideal[c, [a, b]] = ideal[c, [b, a]]
-    return uv, weight
+    return uv, weight, P, ideal
 
 
 def align_root(body, rig_points, x, targets, ok):
@@ -128,8 +137,8 @@ def fit_to_points(body, rig_points, x0, targets, ok, hold=0.02, dofs=None, max_n
 
 def triangulated_landmarks(cameras, targets, rig_points):
     """The frame's landmarks in 3D: (K,3) points and (K,) ok, left/right swaps resolved per view."""
-    uv, weight = resolve_swaps(cameras, targets.uv, targets.weight, rig_points.swap)
-    return triangulate(cameras, uv, weight)
+    _, weight, P, ideal = _resolve_swaps(cameras, targets.uv, targets.weight, rig_points.swap)
+    return _dlt(P, ideal, weight, MIN_WEIGHT)
 
 
 def limb_distances_3d(rig_points, world_points, X, ok):
