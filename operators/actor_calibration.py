@@ -91,7 +91,6 @@ class CalibrationJob:
         self.fit = None
         self.error = None  # (message, traceback)
         self.done = False
-        self.cancelled = False
         self.thread = None
 
     def start(self):
@@ -133,8 +132,11 @@ class CalibrationJob:
     def fraction(self):
         return min(1.0, self.solved / self.n_frames) if self.n_frames else 0.0
 
+    @property
+    def cancelled(self):
+        return self.session.cancelled
+
     def request_cancel(self):
-        self.cancelled = True
         self.session.cancel()
 
     def wait(self):
