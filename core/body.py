@@ -147,6 +147,8 @@ class Body:
         self._term_dof = np.array([t[1] for t in terms], dtype=np.int64)
         self._term_axis = np.array([t[2] for t in terms], dtype=np.float64).reshape(-1, 3)
         self._term_share = np.array([t[3] for t in terms], dtype=np.float64)
+        term_bones = np.array([t[0] for t in terms], dtype=np.int64)  # ascending: the terms go bone by bone
+        self._term_start = np.searchsorted(term_bones, np.arange(B + 1)).astype(np.int64)
         self._bone_terms = {}
         for k, (b, *_rest) in enumerate(terms):
             self._bone_terms.setdefault(b, []).append(k)
@@ -227,7 +229,17 @@ class Body:
         return out
 
     def pose_matrices(self, poses, root_anchor=None, world=True):
-        """(P,D) -> (P,B,4,4) bone pose matrices (world space unless world=False)."""
+        """(P,D) -> (P,B,4,4) bone pose matrices (world space unless world=False).
+
+        The numba chain (core/fast_kinematics.py) when numba is there, else pose_matrices_reference."""
+        fast = _fast_kinematics()
+        if fast is None:
+            return self.pose_matrices_reference(poses, root_anchor, world)
+        poses = np.ascontiguousarray(np.atleast_2d(np.asarray(poses, dtype=np.float64)))
+        return fast.pose_matrices(self, poses, self._root_basis(poses, root_anchor), world)
+
+    def pose_matrices_reference(self, poses, root_anchor=None, world=True):
+        """pose_matrices in NumPy: every bone's basis for the whole batch, then the chain of batched products."""
         sk = self.skeleton
         basis = self.local_bases(poses, root_anchor)
         pose = np.empty_like(basis)
@@ -264,6 +276,21 @@ class Body:
             vertices, weights, unweighted = self.vertices, self.weights, self.unweighted
         M = self.skinning_matrices(poses, root_anchor)  # (P,B,4,4)
         return _fast_blend()(M, vertices, weights, unweighted, self.skeleton.armature_matrix)
+
+
+def _fast_kinematics():
+    """core/fast_kinematics.py when numba is there, else None (the NumPy reference then)."""
+    global _KINEMATICS
+    if _KINEMATICS is None:
+        try:
+            from . import fast_kinematics
+        except ImportError:
+            fast_kinematics = False
+        _KINEMATICS = fast_kinematics
+    return _KINEMATICS or None
+
+
+_KINEMATICS = None
 
 
 def _fast_blend():

@@ -87,6 +87,24 @@ def test_local_bases_equal_the_product_of_each_dof_rotation(subject):
     np.testing.assert_allclose(body.local_bases(poses), reference, rtol=0, atol=1e-15)
 
 
+def test_numba_kinematics_equal_the_numpy_reference(subject):
+    from markerless_mocap.core import fast_kinematics
+
+    _, _, body = subject
+    rng = np.random.default_rng(11)
+    poses = random_poses(body, rng, 25, spread=1.0)
+    anchor = rng.normal(size=(3, 3))
+    anchor = np.linalg.qr(anchor)[0] * np.sign(np.linalg.det(np.linalg.qr(anchor)[0]))  # a rotation
+    for root_anchor in (None, anchor):
+        for world in (True, False):
+            ref = body.pose_matrices_reference(poses, root_anchor, world)
+            fast = fast_kinematics.pose_matrices(body, poses, body._root_basis(poses, root_anchor), world)
+            np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(body.pose_matrices(poses, root_anchor, world), ref, rtol=0, atol=1e-12)
+    # One pose, as the local fit asks.
+    np.testing.assert_allclose(body.pose_matrices(poses[3]), body.pose_matrices_reference(poses[3]), rtol=0, atol=1e-12)
+
+
 def test_numba_skinning_equals_the_numpy_reference(subject):
     from markerless_mocap.core.body import blend_vertices
     from markerless_mocap.core.fast_skinning import blend_vertices as fast_blend
