@@ -236,7 +236,7 @@ class Tracker:
 
     def _background_models(self):
         cap, mode = self.capture, self.settings.background
-        models = {}
+        models, from_clip = {}, {}
         for cam in cap.cameras:
             plate = (cap.backgrounds or {}).get(cam.name)
             if mode in ("auto", "plate") and plate is not None:
@@ -247,9 +247,17 @@ class Tracker:
                                         f"background/{cam.name}.png in the capture, or use --background median")
             n = cap.frames.n_frames
             picks = np.unique(np.linspace(0, n - 1, min(self.settings.background_frames, n)).round().astype(int))
-            frames = [cap.frames.read_camera(cam.name, int(f)) for f in picks]
-            models[cam.name] = BackgroundModel.from_frames(frames, method="median" if mode == "auto" else mode)
-        return models
+            from_clip[cam.name] = [cap.frames.read_camera(cam.name, int(f)) for f in picks]
+        if from_clip:
+            # The clip medians (seconds per HD camera, in NumPy calls that release the GIL) on both cores, the
+            # cameras in parallel; the frames were read above, on this thread, as the reader wants.
+            from concurrent.futures import ThreadPoolExecutor
+
+            method = "median" if mode == "auto" else mode
+            with ThreadPoolExecutor(max_workers=min(2, len(from_clip))) as pool:
+                built = pool.map(lambda frames: BackgroundModel.from_frames(frames, method=method), from_clip.values())
+                models.update(zip(from_clip, built))
+        return {cam.name: models[cam.name] for cam in cap.cameras}
 
     def features(self, frame, guide_poses=None):
         """The frame's ViewFeatures per camera; with learned evidence, also sets self.evidence (one

@@ -76,3 +76,25 @@ def test_unknown_exposure_model_is_a_clear_error(plate):
         BackgroundModel.from_plate(plate.astype(np.uint8), exposure="auto")
     with pytest.raises(ValueError, match="unknown exposure model"):
         match_exposure(plate, plate, "auto")
+
+
+def test_tone_curve_from_a_strided_subsample_matches_the_full_fit():
+    """Above _MAX_CURVE_SAMPLES (an HD frame) the curve is fitted on an even stride of the samples: its knots
+    stay within a fraction of a grey level of the fit on every sample."""
+    from markerless_mocap.core.features import exposure
+
+    rng = np.random.default_rng(3)
+    n = 3 * exposure._MAX_CURVE_SAMPLES
+    source = rng.uniform(0, 255, n)
+    target = 255 * (source / 255) ** 0.8 + rng.normal(0, 3, n)
+    sub_x, sub_y = exposure.fit_tone_curve(source, target)
+    limit = exposure._MAX_CURVE_SAMPLES
+    try:
+        exposure._MAX_CURVE_SAMPLES = n  # every sample
+        full_x, full_y = exposure.fit_tone_curve(source, target)
+    finally:
+        exposure._MAX_CURVE_SAMPLES = limit
+    assert len(sub_x) == len(full_x) == 32
+    np.testing.assert_allclose(sub_x, full_x, atol=0.2)
+    np.testing.assert_allclose(sub_y, full_y, atol=0.3)
+    assert not np.array_equal(sub_y, full_y)  # the stride did take a subsample

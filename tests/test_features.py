@@ -335,3 +335,14 @@ def test_diffusion_accepts_one_channel_and_rejects_bad_parameters():
         edge_enhancing_diffusion(img, tau=0)
     with pytest.raises(FeatureInputError, match="HxWx2"):
         edge_enhancing_diffusion(np.zeros((2, 3, 4, 5)))
+
+
+def test_strip_wise_temporal_median_equals_numpy_median_of_the_stack():
+    from markerless_mocap.core.features.background import _temporal_median
+
+    rng = np.random.default_rng(5)
+    frames = [rng.uniform(0, 255, (150, 37, 3)).astype(np.float32) for _ in range(7)]
+    np.testing.assert_array_equal(_temporal_median(frames, rows_per_strip=64), np.median(np.stack(frames), axis=0))
+    ref = np.stack(frames)[..., 0].mean(axis=0)
+    dev = _temporal_median(frames, lambda strip, rows: np.abs(strip[..., 0] - ref[rows]), rows_per_strip=16)
+    np.testing.assert_array_equal(dev, np.median(np.abs(np.stack(frames)[..., 0] - ref), axis=0))
