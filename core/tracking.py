@@ -10,7 +10,9 @@ the pi wrap of rotation vectors, even when the subject turns around. The anchor 
 subject; stored particles are re-expressed when it does.
 """
 import dataclasses
+import threading
 import time
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -164,6 +166,48 @@ class FrameEstimate:
     landmark_visibility: np.ndarray | None = None
 
 
+class LazyBackgrounds(Mapping):
+    """Camera name -> BackgroundModel, each made by make(read(name)) when first asked for (under a lock: the
+    prefetch worker may ask). build_all() makes the missing ones at once: their frames read one camera after
+    the other (the capture's reader serves one thread), then the clip medians two cameras at a time (NumPy
+    work that releases the GIL)."""
+
+    def __init__(self, names, read, make, ready=None):
+        self._names = list(names)
+        self._read, self._make = read, make
+        self._models = dict(ready or {})
+        self._lock = threading.Lock()
+
+    def __getitem__(self, name):
+        with self._lock:
+            if name not in self._models:
+                if name not in self._names:
+                    raise KeyError(name)
+                self._models[name] = self._make(self._read(name))
+            return self._models[name]
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+    def build_all(self):
+        from concurrent.futures import ThreadPoolExecutor
+
+        with self._lock:
+            missing = [n for n in self._names if n not in self._models]
+            if missing:
+                frames = [self._read(n) for n in missing]
+                with ThreadPoolExecutor(max_workers=min(2, len(missing))) as pool:
+                    self._models.update(zip(missing, pool.map(self._make, frames)))
+
+    @property
+    def built(self):
+        """Names of the cameras whose model exists."""
+        return [n for n in self._names if n in self._models]
+
+
 class Tracker:
     """Tracks one subject through a capture. Call `initialise` once, then `track(frame)` per frame."""
 
@@ -235,29 +279,34 @@ class Tracker:
         return {"schedule": self.settings.schedule}
 
     def _background_models(self):
+        """Each camera's BackgroundModel: from its plate, else from the clip (the median of frames spread over
+        it). A clip median costs seconds per camera on HD footage and is only needed where the learned mask is
+        not used (the paper's likelihoods, a view whose crop lost the person), so with the learned mask it is
+        built when first asked for; otherwise now, the cameras on both cores."""
         cap, mode = self.capture, self.settings.background
-        models, from_clip = {}, {}
+        plates, from_clip = {}, []
         for cam in cap.cameras:
             plate = (cap.backgrounds or {}).get(cam.name)
             if mode in ("auto", "plate") and plate is not None:
-                models[cam.name] = BackgroundModel.from_plate(plate)
-                continue
-            if mode == "plate":
+                plates[cam.name] = BackgroundModel.from_plate(plate)
+            elif mode == "plate":
                 raise FileNotFoundError(f"no background plate for camera {cam.name!r}: expected "
                                         f"background/{cam.name}.png in the capture, or use --background median")
-            n = cap.frames.n_frames
-            picks = np.unique(np.linspace(0, n - 1, min(self.settings.background_frames, n)).round().astype(int))
-            from_clip[cam.name] = [cap.frames.read_camera(cam.name, int(f)) for f in picks]
-        if from_clip:
-            # The clip medians (seconds per HD camera, in NumPy calls that release the GIL) on both cores, the
-            # cameras in parallel; the frames were read above, on this thread, as the reader wants.
-            from concurrent.futures import ThreadPoolExecutor
+            else:
+                from_clip.append(cam.name)
+        method = "median" if mode == "auto" else mode
+        models = LazyBackgrounds([c.name for c in cap.cameras], self._background_frames,
+                                 lambda frames: BackgroundModel.from_frames(frames, method=method), plates)
+        weights = self.energy.weights
+        if from_clip and not (weights.needs_learned_evidence and weights.mask == "learned"):
+            models.build_all()
+        return models
 
-            method = "median" if mode == "auto" else mode
-            with ThreadPoolExecutor(max_workers=min(2, len(from_clip))) as pool:
-                built = pool.map(lambda frames: BackgroundModel.from_frames(frames, method=method), from_clip.values())
-                models.update(zip(from_clip, built))
-        return {cam.name: models[cam.name] for cam in cap.cameras}
+    def _background_frames(self, name):
+        """The frames a clip-median background of camera `name` is made from: spread over the whole clip."""
+        n = self.capture.frames.n_frames
+        picks = np.unique(np.linspace(0, n - 1, min(self.settings.background_frames, n)).round().astype(int))
+        return [self.capture.frames.read_camera(name, int(f)) for f in picks]
 
     def features(self, frame, guide_poses=None):
         """The frame's ViewFeatures per camera; with learned evidence, also sets self.evidence (one
@@ -290,8 +339,8 @@ class Tracker:
                 sil = check_mask(self.backgrounds[cam.name].silhouette(images[cam.name]))
                 masks.append([resize_mask(sil, feature_size(shape, s)) for s in scales])
         fine = [m[1] for m in masks] if len(scales) > 1 else None
-        feats = [compute_view_features(images[cam.name], self.backgrounds[cam.name], scale=self.scale,
-                                       diffuse=self.uses_color, silhouette=m[0])
+        feats = [compute_view_features(images[cam.name], None, scale=self.scale, diffuse=self.uses_color,
+                                       silhouette=m[0])
                  for cam, m in zip(cams, masks)]
         return feats, evidence, fine
 

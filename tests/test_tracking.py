@@ -295,3 +295,18 @@ def test_a_hand_off_in_3d_is_proposed_though_the_views_median_is_small(walk):
     print(f"left wrist {1000 * before:.0f} -> {1000 * after:.0f} mm, energy {energy:.3f} -> {fixed_energy:.3f}")
     assert tracker.proposals[-1] == {"limbs": ["left arm"], "kept": True}
     assert fixed_energy < energy and after < 0.06
+
+
+def test_clip_backgrounds_are_made_when_first_needed_and_equal_the_eager_ones(walk):
+    """With the learned mask a clip-median background (seconds per HD camera) is made only for a view that
+    asks; the paper's likelihoods need every view's at once. Both make the same model."""
+    names = [c.name for c in walk["capture"].cameras]
+    lazy = make_tracker(walk, background="median")  # the default likelihood: the learned person mask
+    assert lazy.backgrounds.built == []
+    eager = make_tracker(walk, background="median", likelihood="silh+edge")
+    assert eager.backgrounds.built == names
+    np.testing.assert_array_equal(lazy.backgrounds[names[1]]._blurred, eager.backgrounds[names[1]]._blurred)
+    np.testing.assert_array_equal(lazy.backgrounds[names[1]].noise_map, eager.backgrounds[names[1]].noise_map)
+    assert lazy.backgrounds.built == [names[1]]
+    with_plates = make_tracker(walk)  # walk has plates: made at once, they cost nothing
+    assert with_plates.backgrounds.built == names
