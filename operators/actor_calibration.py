@@ -1,11 +1,11 @@
 """Calibrate the actor: track the first frames with the user's rig, fit the proportions to their landmarks,
 save actor.json. Shared by `calibrate`, `track --calibrate` and the Calibrate button (Subject panel)."""
-import queue
-import threading
 import traceback
 from pathlib import Path
 
 import numpy as np
+
+from .worker_job import WorkerJob
 
 DEFAULT_FRAMES = 20  # two thirds of a second at 30 fps. On the actor scene 10 frames left the upper arm 8 % long,
                      # 20 frames 2.5 %, 40 frames 2 % (README, "Actor calibration")
@@ -78,55 +78,46 @@ def save_calibration(fit, out_dir, subject_name, capture_dir):
                       capture=Path(capture_dir).resolve())
 
 
-class CalibrationJob:
-    """The Calibrate button's run in a worker thread, as TrackJob runs Track: the worker only calls
-    fit_calibration and puts plain messages on a queue; the operator's timer drains it on the main thread.
-    Esc cancels after the frame being solved; nothing is saved then."""
+class CalibrationJob(WorkerJob):
+    """The Calibrate button's run in a worker thread, as TrackJob runs Track (operators/worker_job.py): the
+    worker only calls fit_calibration. Esc cancels after the frame being solved; nothing is saved then."""
+    thread_name = "mocap-calibrate"
 
     def __init__(self, session, n_frames):
+        super().__init__()
         self.session, self.n_frames = session, int(n_frames)
-        self.queue = queue.Queue()
         self.solved = 0
         self.status = "starting"
         self.fit = None
         self.error = None  # (message, traceback)
-        self.done = False
-        self.thread = None
 
     def start(self):
-        self.thread = threading.Thread(target=self._work, name="mocap-calibrate", daemon=True)
-        self.thread.start()
+        self.start_worker()
 
-    def _work(self):
-        try:
-            fit = fit_calibration(self.session, log=lambda msg: self.queue.put(("status", str(msg))),
-                                  progress=lambda est: self.queue.put(("frame", est.frame)))
-            self.queue.put(("fit", fit))
-        except (ValueError, OSError) as exc:  # bad input: the message names the problem and the fix
-            self.queue.put(("error", str(exc), ""))
-        except Exception as exc:  # noqa: BLE001  (reported on the main thread, with the traceback)
-            self.queue.put(("error", f"Calibration failed unexpectedly ({type(exc).__name__}: {exc}); see the "
-                                     "system console and report it", traceback.format_exc()))
-        finally:
-            self.queue.put(("done", None))
+    def work(self):
+        fit = fit_calibration(self.session, log=lambda msg: self.queue.put(("status", str(msg))),
+                              progress=lambda est: self.queue.put(("frame", est.frame)))
+        self.queue.put(("fit", fit))
 
-    def drain(self):
-        while True:
-            try:
-                kind, *payload = self.queue.get_nowait()
-            except queue.Empty:
-                return
-            if kind == "frame":
-                self.solved += 1
-                self.status = f"frame {self.solved} of {self.n_frames} solved"
-            elif kind == "status":
-                self.status = payload[0].removeprefix("calibration: ")  # shown under "Calibrating: " already
-            elif kind == "fit":
-                self.fit = payload[0]
-            elif kind == "error":
-                self.error = (payload[0], payload[1])
-            elif kind == "done":
-                self.done = True
+    def describe_failure(self, exc):
+        if isinstance(exc, (ValueError, OSError)):  # bad input: the message names the problem and the fix
+            return str(exc), ""
+        return (f"Calibration failed unexpectedly ({type(exc).__name__}: {exc}); see the system console and "
+                "report it", traceback.format_exc())
+
+    # ---- messages, on the main thread
+    def on_frame(self, _frame):
+        self.solved += 1
+        self.status = f"frame {self.solved} of {self.n_frames} solved"
+
+    def on_status(self, text):
+        self.status = text.removeprefix("calibration: ")  # shown under "Calibrating: " already
+
+    def on_fit(self, fit):
+        self.fit = fit
+
+    def on_error(self, message, details):
+        self.error = (message, details)
 
     @property
     def fraction(self):
@@ -138,11 +129,6 @@ class CalibrationJob:
 
     def request_cancel(self):
         self.session.cancel()
-
-    def wait(self):
-        if self.thread is not None:
-            self.thread.join()
-        self.drain()
 
 
 def describe(fit):

@@ -144,7 +144,7 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
     def cancel(self, context):
         """Blender ends the operator (file loaded, window closed): stop the worker, save nothing."""
         self._job.request_cancel()
-        self._job.wait()
+        self._job.join()
         end_modal(self, context)
         context.scene.mocap.is_calibrating = False
 

@@ -6,8 +6,6 @@ keyed (`TrackSession.key`) and the panel's progress is updated. Esc / right-clic
 stop after the current frame; the keys already made stay and `finish()` writes what was solved.
 Without an event loop (background mode, tests) `execute` runs the same steps synchronously.
 """
-import queue
-import threading
 import time
 import traceback
 from pathlib import Path
@@ -15,6 +13,7 @@ from pathlib import Path
 import bpy
 
 from .modal_run import begin_modal, end_modal, is_cancel_key, show_status
+from .worker_job import WorkerJob
 
 # The real class lives in track_session.py, which pulls in the whole engine: it is imported on first
 # use so that enabling the add-on stays fast. Tests replace this name with a fake session.
@@ -96,21 +95,21 @@ def build_session(context, log=None, step=None):
     return session
 
 
-class TrackJob:
+class TrackJob(WorkerJob):
     """One run of a session: solving in a worker thread (or inline), keying on the caller's thread.
 
-    Thread rule: the worker calls only `session.solve_next()` and puts plain results on the queue;
-    everything else (keys, properties, finish) happens where `drain` / `run_inline` / `finish` are called.
+    Thread rule (operators/worker_job.py): the worker calls only `session.solve_next()` and puts plain results
+    on the queue; everything else (keys, properties, finish) happens where `drain` / `run_inline` / `finish`
+    are called.
     """
+    thread_name = "mocap-track"
 
     def __init__(self):
+        super().__init__()
         self.session = None
-        self.queue = queue.Queue()
-        self.thread = None
         self.estimates = []
         self.error = None  # text naming what failed, or None
         self.cancelled = False
-        self.done = False
         self.status = ""  # the session's latest message; shown until the next frame arrives
         self.step = None  # (text, fraction) of the one-off preparation while it runs
         self.out_dir = None
@@ -156,41 +155,27 @@ class TrackJob:
     # ---- threaded run
     def start(self, session):
         self._attach(session)
-        self.thread = threading.Thread(target=self._work, name="mocap-track", daemon=True)
-        self.thread.start()
+        self.start_worker()
 
-    def _work(self):
-        try:
-            while not self.cancelled:
-                estimate = self.session.solve_next()
-                if estimate is None:
-                    break
-                self.queue.put(("frame", estimate))
-        except Exception as exc:  # reported on the main thread, never swallowed
-            self.queue.put(("error", f"{type(exc).__name__}: {exc}", traceback.format_exc()))
-        finally:
-            self.queue.put(("done", None))
+    def work(self):
+        while not self.cancelled:
+            estimate = self.session.solve_next()
+            if estimate is None:
+                break
+            self.queue.put(("frame", estimate))
 
-    def drain(self):
-        """Main thread: key every estimate that arrived; return them. Sets `done` when the worker ended."""
-        new = []
-        while True:
-            try:
-                message = self.queue.get_nowait()
-            except queue.Empty:
-                return new
-            kind = message[0]
-            if kind == "frame":
-                if self._key(message[1]):
-                    new.append(message[1])
-            elif kind == "status":
-                self.status = message[1]
-            elif kind == "step":
-                self.step = None if message[1] is None else (message[1], min(1.0, max(0.0, message[2])))
-            elif kind == "error":
-                self._fail(message[1], message[2])
-            elif kind == "done":
-                self.done = True
+    # ---- messages, on the main thread: drain() returns the estimates keyed
+    def on_frame(self, estimate):
+        return estimate if self._key(estimate) else None
+
+    def on_status(self, text):
+        self.status = text
+
+    def on_step(self, text, fraction):
+        self.step = None if text is None else (text, min(1.0, max(0.0, fraction)))
+
+    def on_error(self, message, details):
+        self._fail(message, details)
 
     def _key(self, estimate):
         if self.error is not None:
@@ -232,9 +217,7 @@ class TrackJob:
 
     def finish(self, export=True):
         """Wait for the worker, key what is left, write the results. Returns the session's summary."""
-        if self.thread is not None:
-            self.thread.join()
-            self.drain()
+        self.join()
         self.done = True
         return self.session.finish(export=export)
 
@@ -411,9 +394,7 @@ class MOCAP_OT_track(bpy.types.Operator):
         write the result files for the solved frames, as Esc does."""
         job = self._job
         job.request_cancel()
-        if job.thread is not None:
-            job.thread.join()
-        job.drain()
+        job.join()
         self._cleanup(context)
         try:
             self._end(context, job)

@@ -52,7 +52,7 @@ def test_cancel_stops_after_the_current_frame_and_saves_nothing():
     _wait_for(job, 3)
     assert job.solved == 3 and job.fraction == 0.3 and "frame 3 of 10" in job.status and not job.done
     job.request_cancel()
-    job.wait()
+    job.join()
     assert job.done and job.fit is None and job.error is None
     assert job.solved <= 4 and session.capture.closed
 
@@ -63,6 +63,6 @@ def test_a_run_without_landmarks_fails_with_a_message_naming_the_fix():
     job.start()
     session.release.release()
     session.release.release()
-    job.wait()
+    job.join()
     assert job.done and job.fit is None and job.solved == 2 and session.capture.closed
     assert "calibration needs the learned landmarks" in job.error[0] and "lsilh+edge+kp" in job.error[0]
