@@ -14,6 +14,7 @@ The pose vector: root translation (world position of the root bone's head, metre
 (rotation vector in world axes, applied on top of `root_anchor` @ rest orientation), then joint
 angles in radians about anatomical axes fixed in each bone's rest frame.
 """
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -278,34 +279,24 @@ class Body:
         return _fast_blend()(M, vertices, weights, unweighted, self.skeleton.armature_matrix)
 
 
+@functools.cache
 def _fast_kinematics():
     """core/fast_kinematics.py when numba is there, else None (the NumPy reference then)."""
-    global _KINEMATICS
-    if _KINEMATICS is None:
-        try:
-            from . import fast_kinematics
-        except ImportError:
-            fast_kinematics = False
-        _KINEMATICS = fast_kinematics
-    return _KINEMATICS or None
+    try:
+        from . import fast_kinematics
+    except ImportError:
+        return None
+    return fast_kinematics
 
 
-_KINEMATICS = None
-
-
+@functools.cache
 def _fast_blend():
     """The numba skinning (core/fast_skinning.py) when numba is there, else the NumPy reference below."""
-    global _BLEND
-    if _BLEND is None:
-        try:
-            from .fast_skinning import blend_vertices as fast
-        except ImportError:
-            fast = blend_vertices
-        _BLEND = fast
-    return _BLEND
-
-
-_BLEND = None
+    try:
+        from .fast_skinning import blend_vertices as fast
+    except ImportError:
+        return blend_vertices
+    return fast
 
 
 def blend_vertices(skin_matrices, vertices, weights, unweighted, armature_matrix):

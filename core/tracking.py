@@ -284,7 +284,7 @@ class Tracker:
         not used (the paper's likelihoods, a view whose crop lost the person), so with the learned mask it is
         built when first asked for; otherwise now, the cameras on both cores."""
         cap, mode = self.capture, self.settings.background
-        plates, from_clip = {}, []
+        plates = {}
         for cam in cap.cameras:
             plate = (cap.backgrounds or {}).get(cam.name)
             if mode in ("auto", "plate") and plate is not None:
@@ -292,14 +292,12 @@ class Tracker:
             elif mode == "plate":
                 raise FileNotFoundError(f"no background plate for camera {cam.name!r}: expected "
                                         f"background/{cam.name}.png in the capture, or use --background median")
-            else:
-                from_clip.append(cam.name)
         method = "median" if mode == "auto" else mode
         models = LazyBackgrounds([c.name for c in cap.cameras], self._background_frames,
                                  lambda frames: BackgroundModel.from_frames(frames, method=method), plates)
         weights = self.energy.weights
-        if from_clip and not (weights.needs_learned_evidence and weights.mask == "learned"):
-            models.build_all()
+        if not (weights.needs_learned_evidence and weights.mask == "learned"):
+            models.build_all()  # the cameras without a plate (none: nothing to do)
         return models
 
     def _background_frames(self, name):
