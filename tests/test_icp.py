@@ -333,6 +333,25 @@ def test_twist_jacobian_matches_finite_differences(subject):
     assert rel.max() < 1e-3, dict(zip(body.dof_names, rel.round(6)))
 
 
+def test_numba_vertex_jacobian_equals_the_numpy_reference(subject):
+    from markerless_mocap.core import fast_jacobian
+    from markerless_mocap.core.optimizers.icp import descendant_matrix, vertex_jacobian_reference
+
+    body, proxy, space, x_true, cams, sils = subject
+    rng = np.random.default_rng(8)
+    weights = np.where(proxy.unweighted[:, None], 0.0, proxy.weights)  # as the solver uses them
+    onehot = np.eye(body.skeleton.n_bones)[rng.integers(0, body.skeleton.n_bones, 40)]  # rig points: one bone
+    rest = rng.normal(0, 0.3, (40, 3))
+    anywhere = x_true.copy()  # every bounded DOF anywhere within its limits
+    bounded = np.isfinite(body.lower) & np.isfinite(body.upper)
+    anywhere[bounded] = body.lower[bounded] + rng.random(bounded.sum()) * (body.upper - body.lower)[bounded]
+    for x in (x_true, perturbed(body, x_true, rng, 0.05, 10.0), anywhere):
+        for verts, w in ((proxy.vertices, weights), (rest, onehot)):
+            ref = vertex_jacobian_reference(body, x, verts, w, descendant_matrix(body.skeleton))
+            fast = fast_jacobian.vertex_jacobian(body, x, verts, w)
+            np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * max(1.0, np.abs(ref).max()))
+
+
 # ---------------------------------------------------------------- convergence
 
 NEAR_STARTS = 3

@@ -23,6 +23,7 @@ black-box energy evaluations in its search; the base class scores the final esti
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -158,6 +159,23 @@ def descendant_matrix(skeleton) -> np.ndarray:
 
 
 def vertex_jacobian(body, pose_abs, rest_vertices, weights, descendants=None) -> np.ndarray:
+    """vertex_jacobian_reference, compiled (core/fast_jacobian.py) when numba is there."""
+    fast = _fast_jacobian()
+    if fast is None:
+        return vertex_jacobian_reference(body, pose_abs, rest_vertices, weights, descendants)
+    return fast.vertex_jacobian(body, pose_abs, rest_vertices, weights)
+
+
+@functools.cache
+def _fast_jacobian():
+    try:
+        from .. import fast_jacobian
+    except ImportError:
+        return None
+    return fast_jacobian
+
+
+def vertex_jacobian_reference(body, pose_abs, rest_vertices, weights, descendants=None) -> np.ndarray:
     """(N,3,D) derivative of the skinned world vertices at one absolute pose (twists, module doc).
 
     rest_vertices (N,3) armature space and weights (N,B) as in Body.deform (unweighted vertices have
