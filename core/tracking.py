@@ -124,6 +124,9 @@ class TrackingSettings:
     # Observe frame t+1 (read, learned evidence, features) in a worker thread during frame t's local fit;
     # the same result either way.
     prefetch: bool = True
+    # Place (and observe) frame t+1's crops before frame t's search rather than after it (see
+    # Tracker._guide_before_search): for searches too short to hide the observation behind the local fit.
+    observe_early: bool = False
     optimizer_options: dict = field(default_factory=dict)
 
     @property
@@ -148,7 +151,8 @@ class TrackingSettings:
 # "Speed": its seconds per frame and accuracy on every sample scene).
 PRESETS = {
     "full": {},
-    "preview": {"particles": 50, "iterations": 4, "fine_refine": False, "refine_iterations": 6},
+    "preview": {"particles": 50, "iterations": 4, "fine_refine": False, "refine_iterations": 6,
+                "observe_early": True},
 }
 
 
@@ -347,13 +351,27 @@ class Tracker:
     # t+1 need only where the person will be: the crops are placed around the search's estimate of frame t
     # (before the local fit, which moves it by a centimetre or two within crops 1.35 x the body), so they are
     # computed in a worker thread while the main thread runs the local fit, which uses one core.
-    def _plan_next(self, frame, searched, observe):
-        """Place the next frame's crops around the search's estimate (and its step from the last frame), and
-        observe that frame in the worker when `observe`. The plan is kept in the tracker's state, so a resumed
-        run places the crops as an uninterrupted one did."""
-        frame = int(frame)
+    # With `observe_early` (the preview preset) they are placed before frame t's search, around the last two
+    # frames' steps carried on to t and t+1: a short search leaves the worker too little time after it, and
+    # the main thread waited for the worker (HD footage: 0.1 s of each 0.27 s frame, README "Speed").
+    def _guide_after_search(self, searched):
+        """Frame t+1's crops: around the search's estimate of t and one more step of the same size."""
         last = [self.to_absolute(h) for h in self.history[-1:]] + [self.to_absolute(searched)]
-        guide = np.stack(last) if len(last) == 1 else np.stack([last[1], 2 * last[1] - last[0]])
+        return np.stack(last) if len(last) == 1 else np.stack([last[1], 2 * last[1] - last[0]])
+
+    def _guide_before_search(self):
+        """Frame t+1's crops before frame t is solved: the last step carried on to t and to t+1."""
+        last = [self.to_absolute(h) for h in self.history[-2:]]
+        if len(last) < 2:
+            return np.stack(last)
+        step = last[1] - last[0]
+        return np.stack([last[1] + step, last[1] + 2 * step])
+
+    def _plan_next(self, frame, guide, observe):
+        """Place the next frame's crops around `guide` (absolute poses), and observe that frame in the worker
+        when `observe`. The plan is kept in the tracker's state, so a resumed run places the crops as an
+        uninterrupted one did."""
+        frame = int(frame)
         self.next_guide = (frame, guide)
         if not observe or not 0 <= frame < self.capture.frames.n_frames:
             return
@@ -564,12 +582,16 @@ class Tracker:
     def _track(self, frame, next_frame):
         t0 = time.perf_counter()
         feats = self.load_frame(frame)
+        upcoming = frame + 1 if next_frame is NEXT or next_frame is None else next_frame
+        observe = self.settings.prefetch and next_frame is not None
+        if self.settings.observe_early:
+            self._plan_next(upcoming, self._guide_before_search(), observe)
         if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
             self.optimizer.set_frame_problem(self._icp_problem(feats))
         result = self.optimizer.track_frame(self._energy_fn, list(self.history))
         estimate, energy, evaluations = result.estimate, result.energy, result.evaluations
-        self._plan_next(frame + 1 if next_frame is NEXT or next_frame is None else next_frame, estimate,
-                        observe=self.settings.prefetch and next_frame is not None)
+        if not self.settings.observe_early:
+            self._plan_next(upcoming, self._guide_after_search(estimate), observe)
         if self.refines:
             estimate = self._refine(feats, estimate)
             energy, evaluations = float(self._energy_fn(estimate[None])[0]), evaluations + 1

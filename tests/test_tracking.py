@@ -140,16 +140,30 @@ def test_resume_continues_exactly(tmp_path):
     np.testing.assert_array_equal(full["poses"], split["poses"])
 
 
-def test_observing_the_next_frame_in_the_worker_changes_nothing(walk):
+@pytest.mark.parametrize("observe_early", [False, True])
+def test_observing_the_next_frame_in_the_worker_changes_nothing(walk, observe_early):
     # The next frame is read and its learned evidence computed in a worker thread during this frame's local
-    # fit; the result must be what the same plan computed in the main thread gives.
+    # fit (observe_early: during its search and local fit); the result must be what the same plan computed in
+    # the main thread gives.
     runs = {}
     for prefetch in (True, False):
-        tracker = make_tracker(walk, particles=30, iterations=3, seed=1, prefetch=prefetch)
+        tracker = make_tracker(walk, particles=30, iterations=3, seed=1, prefetch=prefetch,
+                               observe_early=observe_early)
         ests = run_tracker(tracker, range(0, 5), initial_pose=walk["gt"][0])
         runs[prefetch] = np.stack([e.pose for e in ests])
         assert tracker._pool is None and tracker._prefetched is None  # run_tracker stopped the worker
     np.testing.assert_array_equal(runs[True], runs[False])
+
+
+def test_early_crops_carry_the_last_step_on_to_this_frame_and_the_next(walk):
+    # observe_early places frame t+1's crops before frame t is solved: around t-1 + step and t-1 + 2 step.
+    tracker = make_tracker(walk, particles=30, iterations=3, seed=1, observe_early=True)
+    run_tracker(tracker, range(0, 3), initial_pose=walk["gt"][0])
+    x0, x1, x2 = (tracker.to_absolute(h) for h in tracker.history[-3:])
+    planned_frame, planned = tracker.next_guide  # planned before frame 2's search, from frames 0 and 1
+    assert planned_frame == 3
+    np.testing.assert_allclose(planned, [2 * x1 - x0, 3 * x1 - 2 * x0], atol=1e-9)
+    np.testing.assert_allclose(tracker._guide_before_search(), [2 * x2 - x1, 3 * x2 - 2 * x1], atol=1e-12)
 
 
 def test_result_folder_files_all_load(tmp_path):
