@@ -9,22 +9,8 @@ import math
 
 import numpy as np
 
+from .fast_kinematics import rodrigues
 from .jit import jit
-
-
-@jit()
-def _rodrigues(x, y, z, angle, rot):
-    s, c1 = math.sin(angle), 1.0 - math.cos(angle)
-    aa = x * x + y * y + z * z
-    rot[0, 0] = 1.0 + c1 * (x * x - aa)
-    rot[1, 1] = 1.0 + c1 * (y * y - aa)
-    rot[2, 2] = 1.0 + c1 * (z * z - aa)
-    rot[0, 1] = -s * z + c1 * x * y
-    rot[1, 0] = s * z + c1 * x * y
-    rot[0, 2] = s * y + c1 * x * z
-    rot[2, 0] = -s * y + c1 * x * z
-    rot[1, 2] = -s * x + c1 * y * z
-    rot[2, 1] = s * x + c1 * y * z
 
 
 @jit()
@@ -98,7 +84,7 @@ def _jacobian_kernel(pose, world, inv_rest, rest_relative, parents, armature, ve
                 J[n, 0, d] += wy * lz - wz * ly
                 J[n, 1, d] += wz * lx - wx * lz
                 J[n, 2, d] += wx * ly - wy * lx
-            _rodrigues(ax, ay, az, pose[d] * share, rot)
+            rodrigues(ax, ay, az, pose[d] * share, rot)
             for i in range(3):
                 for j in range(3):
                     tmp[i, j] = acc3[i, 0] * rot[0, j] + acc3[i, 1] * rot[1, j] + acc3[i, 2] * rot[2, j]

@@ -21,6 +21,23 @@ def _matmul4(a, b, out):
 
 
 @jit()
+def rodrigues(x, y, z, angle, rot):
+    """rot (3,3) <- the rotation by `angle` about the unit axis (x, y, z): I + sin K + (1 - cos) K^2, with
+    K^2 = a a^T - (a.a) I."""
+    s, c1 = math.sin(angle), 1.0 - math.cos(angle)
+    aa = x * x + y * y + z * z
+    rot[0, 0] = 1.0 + c1 * (x * x - aa)
+    rot[1, 1] = 1.0 + c1 * (y * y - aa)
+    rot[2, 2] = 1.0 + c1 * (z * z - aa)
+    rot[0, 1] = -s * z + c1 * x * y
+    rot[1, 0] = s * z + c1 * x * y
+    rot[0, 2] = s * y + c1 * x * z
+    rot[2, 0] = -s * y + c1 * x * z
+    rot[1, 2] = -s * x + c1 * y * z
+    rot[2, 1] = s * x + c1 * y * z
+
+
+@jit()
 def _chain_kernel(poses, term_axis, term_dof, term_share, term_start, root_basis, root_bone, order, parents,
                   rest_relative, armature, world, out):
     P = poses.shape[0]
@@ -38,20 +55,8 @@ def _chain_kernel(poses, term_axis, term_dof, term_share, term_start, root_basis
                 for i in range(4):
                     basis[i, i] = 1.0
                 for k in range(term_start[b], term_start[b + 1]):
-                    # Rodrigues: I + sin K + (1 - cos) K^2, with K^2 = a a^T - (a.a) I.
-                    x, y, z = term_axis[k, 0], term_axis[k, 1], term_axis[k, 2]
-                    angle = poses[p, term_dof[k]] * term_share[k]
-                    s, c1 = math.sin(angle), 1.0 - math.cos(angle)
-                    aa = x * x + y * y + z * z
-                    rot[0, 0] = 1.0 + c1 * (x * x - aa)
-                    rot[1, 1] = 1.0 + c1 * (y * y - aa)
-                    rot[2, 2] = 1.0 + c1 * (z * z - aa)
-                    rot[0, 1] = -s * z + c1 * x * y
-                    rot[1, 0] = s * z + c1 * x * y
-                    rot[0, 2] = s * y + c1 * x * z
-                    rot[2, 0] = -s * y + c1 * x * z
-                    rot[1, 2] = -s * x + c1 * y * z
-                    rot[2, 1] = s * x + c1 * y * z
+                    rodrigues(term_axis[k, 0], term_axis[k, 1], term_axis[k, 2],
+                              poses[p, term_dof[k]] * term_share[k], rot)
                     for i in range(3):
                         for j in range(3):
                             tmp[i, j] = basis[i, 0] * rot[0, j] + basis[i, 1] * rot[1, j] + basis[i, 2] * rot[2, j]
