@@ -356,16 +356,11 @@ class Tracker:
     # the main thread waited for the worker (HD footage: 0.1 s of each 0.27 s frame, README "Speed").
     def _guide_after_search(self, searched):
         """Frame t+1's crops: around the search's estimate of t and one more step of the same size."""
-        last = [self.to_absolute(h) for h in self.history[-1:]] + [self.to_absolute(searched)]
-        return np.stack(last) if len(last) == 1 else np.stack([last[1], 2 * last[1] - last[0]])
+        return carried_on([self.to_absolute(h) for h in self.history[-1:]] + [self.to_absolute(searched)], (0, 1))
 
     def _guide_before_search(self):
         """Frame t+1's crops before frame t is solved: the last step carried on to t and to t+1."""
-        last = [self.to_absolute(h) for h in self.history[-2:]]
-        if len(last) < 2:
-            return np.stack(last)
-        step = last[1] - last[0]
-        return np.stack([last[1] + step, last[1] + 2 * step])
+        return carried_on([self.to_absolute(h) for h in self.history[-2:]], (1, 2))
 
     def _plan_next(self, frame, guide, observe):
         """Place the next frame's crops around `guide` (absolute poses), and observe that frame in the worker
@@ -418,12 +413,9 @@ class Tracker:
 
     def _guide_poses(self):
         """Where the person is expected this frame: the last estimate and its constant-velocity step."""
-        last = [self.to_absolute(h) for h in self.history[-2:]]
-        if not last:
+        if not self.history:
             return self.body.default_pose()[None]  # nothing solved yet: the subject as placed
-        if len(last) == 2:
-            return np.stack([last[1], 2 * last[1] - last[0]])
-        return np.stack(last)
+        return carried_on([self.to_absolute(h) for h in self.history[-2:]], (0, 1))
 
     def load_frame(self, frame, guide_poses=None):
         """Compute `frame`'s features (and learned evidence, crops around `guide_poses`, by default the
@@ -739,6 +731,15 @@ class Tracker:
         self.energy.color_model, self.energy.color_count = state["color_model"]
         self.limb_off_frames = dict(state.get("limb_off_frames", {}))
         self.next_guide = state.get("next_guide")
+
+
+def carried_on(last, steps):
+    """Constant velocity: the poses (k+1) b - k a for each k in `steps`, from the last two poses [a, b];
+    from one pose, that pose alone."""
+    if len(last) < 2:
+        return np.stack(last)
+    a, b = last
+    return np.stack([(1 + k) * b - k * a for k in steps])
 
 
 def run_tracker(tracker, frames, initial_pose=None, rough_pose=None, on_frame=None, should_stop=None):
