@@ -89,6 +89,24 @@ SCENES = {
                            (23, 5, 6, 5, {"Left": "face", "Right": "face"}),
                            (39, 4, 5, 4, {"Left": "shoulder"}),
                            (50, 4, 3, 3, {"Right": "shoulder"})]),
+    # held out like dusk, made in session 15 before any change of that session was measured: 01_01's forward
+    # jumps just after the stretch dusk's second person uses (source frames 430-489), both arms crossed early, a
+    # fifth camera layout (calibration.toml), clothes of its own and a second person; busy's room and dimmer.
+    "lobby": dict(bvh="01_01.bvh", start=430, n_frames=60, seed=3717, uncontrolled=True, calibration="toml",
+                  busy=True, noise=6.5, blur=0.7,
+                  cameras=[
+                      (-76, 3.6, 1.45, 510, (4.0, 3.5), 0.7),
+                      (-31, 4.0, 1.80, 560, (-6.5, -2.0), -1.2),
+                      (14, 3.5, 1.30, 525, (2.0, -5.5), 1.0),
+                      (61, 3.7, 1.70, 540, (-3.0, 6.5), -0.6)],
+                  second=dict(bvh="01_01.bvh", start=120, offset_m=1.8,
+                              colours={"shirt": (0.05, 0.06, 0.18), "trousers": (0.12, 0.12, 0.12),
+                                       "hair": (0.05, 0.04, 0.03)}),
+                  colours={"shirt": (0.12, 0.12, 0.10), "trousers": (0.04, 0.045, 0.05)},
+                  gestures=[(4, 6, 8, 5, {"Left": "cross", "Right": "cross"}),
+                            (25, 5, 5, 4, {"Left": "face"}),
+                            (39, 4, 6, 4, {"Right": "shoulder", "Left": "belly"}),
+                            (53, 3, 2, 2, {"Left": "overhead"})]),
     # issue 15: the walk performed by an actor whose proportions differ from the subject the tracker is given
     # (8 % shorter overall, forearms 10 % longer than that); the tracker gets walk's subject.blend unchanged,
     # and the clip is placed so the actor starts where walk's subject was placed for.

@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "actor"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor"]
 
 
 def scene_dir(name):
@@ -240,6 +240,32 @@ def test_dusk_second_person_and_changing_light():
     if not (d / "videos").is_dir():
         pytest.skip("dusk rendered without videos")
     assert_light_changes_several_fold(d / "videos" / "cam2.mp4")
+
+
+# ---- lobby: held out like dusk, made before session 15 measured anything on it ------------------------
+def test_lobby_arms_cross_both_ways_and_the_body_jumps():
+    d = scene_dir("lobby")
+    names, _, P = load_gt(d)
+    idx, up, lat, fwd = _body_frame(names, P)
+    both_crossed = np.ones(len(P), bool)
+    for side, sign in (("Left", 1.0), ("Right", -1.0)):
+        rel = P[:, idx[f"{side}Hand"]] - P[:, idx["Hips"]]
+        both_crossed &= (sign * (rel * lat).sum(axis=1) < 0) & ((rel * fwd).sum(axis=1) > 0.05)
+    at_face = int((np.linalg.norm(P[:, idx["LeftHand"]] - P[:, idx["Head"]], axis=1) < 0.15).sum())
+    overhead = int((P[:, idx["LeftHand"], 2] > P[:, idx["Head"], 2] + 0.1).sum())
+    assert both_crossed.sum() >= 8 and at_face >= 4 and overhead >= 2, (both_crossed.sum(), at_face, overhead)
+    assert P[:, idx["Hips"], 2].max() - np.median(P[:, idx["Hips"], 2]) > 0.1  # forward jumps
+
+
+def test_lobby_second_person_and_changing_light():
+    d = scene_dir("lobby")
+    info = json.loads((d / "scene_info.json").read_text())
+    views = info["second_person"]["views"]
+    assert sorted(views) == sorted(info["cameras"])
+    assert all(v["in_view_fraction"] >= 0.9 for v in views.values())
+    if not (d / "videos").is_dir():
+        pytest.skip("lobby rendered without videos")
+    assert_light_changes_several_fold(d / "videos" / "cam3.mp4")
 
 
 # ---- actor: a body of other proportions than the subject the tracker is given (issue 15) ------------
