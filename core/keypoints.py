@@ -4,6 +4,8 @@ and the keypoint energy term that compares them in every view.
 LANDMARK_POINTS is the one place that maps BlazePose landmarks onto the rig, by joint role (so every
 rig preset works):
   ("role", "head")   the head of the role's first bone (the joint the segment starts at)
+  ("role", "socket") the same joint, carried by that bone's parent (the clavicle, the pelvis): for landmarks on
+                     the trunk side of a ball joint, which stay put when the limb turns
   ("role", "end")    the head of the first child of the role's last bone (the joint it ends at)
   ("role", "front")  the most forward mesh vertex of the role's body part above the role's end
                      (the nose on the head), carried by the bone that weighs most on that vertex
@@ -20,24 +22,27 @@ from .features.learned import SWAP_ORDER
 
 LANDMARK_POINTS = {
     0: ("neck", "front"),                            # nose
-    11: ("l_shoulder", "head"), 12: ("r_shoulder", "head"),
+    11: ("l_shoulder", "socket"), 12: ("r_shoulder", "socket"),
     13: ("l_elbow", "head"), 14: ("r_elbow", "head"),
     15: ("l_elbow", "end"), 16: ("r_elbow", "end"),  # wrists
-    23: ("l_hip", "head"), 24: ("r_hip", "head"),
+    23: ("l_hip", "socket"), 24: ("r_hip", "socket"),
     25: ("l_knee", "head"), 26: ("r_knee", "head"),
     27: ("l_ankle", "head"), 28: ("r_ankle", "head"),
     31: ("l_ankle", "end"), 32: ("r_ankle", "end"),  # foot index ~ the toes' base
 }
 # Where BlazePose puts a landmark relative to the rig point above, in the carrying bone's frame: (outwards
 # for the landmark's side, forwards, up) in units of the rig's trunk (root head to neck head), so the same
-# numbers serve any rig size. Measured on walk and playground (every other frame, crops from the true
-# pose, landmarks triangulated over the 4 views, the median over frames and both sides): the landmarks lay
-# 0.045-0.088 trunk (24-48 mm on the 0.54 m trunk) from the joints, 0.032-0.058 around these medians.
-# The hips sit forward of and below the hip joints, the wrists and shoulders inside the joints.
+# numbers serve any rig size. Measured on walk and playground by tools/landmark_offsets.py --raw (every other
+# frame, crops from the true pose, landmarks triangulated over the 4 views, the median over frames and both
+# sides): the landmarks lay 0.045-0.088 trunk (24-48 mm on the 0.54 m trunk) from the joints, 0.032-0.058
+# around these medians. The hips sit forward of the hip joints, the wrists and shoulders inside the joints.
+# The shoulders and hips are carried by the trunk ("socket"): carried by the upper arm and thigh, as before,
+# their offsets turned with the limb, and with the arms crossed over the chest (busy) the shoulder points left
+# the landmarks by several pixels in every view.
 LANDMARK_OFFSETS = {
     0: (0.0, -0.036, -0.060),
-    11: (-0.035, -0.029, 0.005), 13: (0.019, 0.057, 0.026), 15: (-0.043, 0.030, 0.024),
-    23: (-0.013, 0.072, -0.049), 25: (0.031, -0.037, -0.026), 27: (0.049, -0.001, 0.038),
+    11: (-0.028, -0.026, 0.033), 13: (0.019, 0.057, 0.026), 15: (-0.043, 0.030, 0.024),
+    23: (-0.013, 0.083, -0.009), 25: (0.031, -0.037, -0.026), 27: (0.049, -0.001, 0.038),
     31: (0.051, -0.001, -0.058),
 }
 # Robust loss rho(r) = r^2 / (r^2 + sigma^2) on the distance r in units of the person's size in the view
@@ -119,9 +124,11 @@ def rig_keypoints(body):
     for lm, (role, where) in LANDMARK_POINTS.items():
         if role not in body.roles:
             raise KeypointMapError(f"the rig has no {role!r} joint for landmark {lm}")
-        if where == "head":
+        if where in ("head", "socket"):
             b = sk.index[body.roles[role][0]]
             p = sk.rest[b, :3, 3]
+            if where == "socket" and sk.parents[b] >= 0:
+                b = int(sk.parents[b])
         elif where == "end":
             b = sk.index[body.roles[role][-1]]
             p = sk.rest[end_bone(body, role), :3, 3]

@@ -1,5 +1,7 @@
 """Learned evidence: crop geometry, the BlazePose wrapper on a rendered frame, the keypoint term and the
 first frame from keypoints."""
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -181,6 +183,28 @@ def test_rig_points_sit_at_the_joints_moved_by_the_landmark_offsets(walk_truth):
         assert np.linalg.norm(posed[k] - heads[sk.index[bone]]) == pytest.approx(np.linalg.norm(at_rest), abs=1e-6)
     nose = posed[list(rig.landmarks).index(0)]
     assert nose[2] > heads[sk.index["Neck1"]][2]  # above the neck, on the face
+
+
+def test_shoulder_and_hip_points_stay_on_the_trunk_when_the_limb_turns(walk_truth):
+    """BlazePose's shoulder and hip landmarks lie on the trunk (acromion, pelvis): their rig points are carried
+    by the clavicle and pelvis bones, so turning the upper arm or thigh moves the elbow and knee points and
+    leaves the shoulder and hip points where they were."""
+    body, poses, cameras, rig = walk_truth
+    pose = poses[0].copy()
+    turned = pose.copy()
+    names = list(body.dof_names)
+    for side in ("l", "r"):
+        for role in ("shoulder", "hip"):
+            for i, name in enumerate(names):
+                if name.startswith(f"{side}_{role}"):
+                    turned[i] += np.deg2rad(25.0)
+    before, after = rig.world(body, np.stack([pose, turned]))
+    moved = np.linalg.norm(after - before, axis=1)
+    index = {int(lm): k for k, lm in enumerate(rig.landmarks)}
+    for lm in (11, 12, 23, 24):  # shoulders, hips
+        assert moved[index[lm]] < 1e-9, lm
+    for lm in (13, 14, 25, 26):  # elbows, knees
+        assert moved[index[lm]] > 0.05, lm
 
 
 def test_keypoint_term_prefers_the_truth_to_perturbations(walk_truth):
@@ -557,3 +581,25 @@ def test_a_pose_on_a_second_guess_costs_little_more_than_on_the_landmark(walk_tr
     np.testing.assert_allclose(chosen[1, wrist], true_uv)
     chosen, _ = chosen_targets(projected[0], without, rig.swap)
     np.testing.assert_allclose(chosen[1, wrist], true_uv + [60.0, 0.0])
+
+
+def test_landmark_offsets_table_is_what_the_measuring_tool_finds():
+    """LANDMARK_OFFSETS against tools/landmark_offsets.py --raw on walk and playground (every 4th frame here,
+    every 2nd for the table): within 0.01 trunk (5 mm) per component."""
+    pytest.importorskip("bpy")
+    import importlib.util
+
+    from markerless_mocap.core.keypoints import LANDMARK_OFFSETS
+
+    repo = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("landmark_offsets", repo / "tools" / "landmark_offsets.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    arrays = []
+    for name in ("walk", "playground"):
+        landmarks, result = tool.measure(scene_dir(name), 4, raw=True)
+        arrays.append(result["own"])
+    table = tool.medians(landmarks, np.concatenate(arrays))
+    for lm, expected in LANDMARK_OFFSETS.items():
+        np.testing.assert_allclose(table[lm][0], expected, atol=0.01, err_msg=f"landmark {lm}")
+
