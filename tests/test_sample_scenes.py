@@ -231,15 +231,19 @@ def test_dusk_hands_go_overhead_to_the_face_and_to_the_other_shoulder():
     assert P[:, idx["Hips"], 2].max() - np.median(P[:, idx["Hips"], 2]) > 0.15
 
 
-def test_dusk_second_person_and_changing_light():
-    d = scene_dir("dusk")
+def assert_second_person_in_every_view_and_changing_light(name, camera):
+    d = scene_dir(name)
     info = json.loads((d / "scene_info.json").read_text())
     views = info["second_person"]["views"]
     assert sorted(views) == sorted(info["cameras"])
     assert all(v["in_view_fraction"] >= 0.9 for v in views.values())
     if not (d / "videos").is_dir():
-        pytest.skip("dusk rendered without videos")
-    assert_light_changes_several_fold(d / "videos" / "cam2.mp4")
+        pytest.skip(f"{name} rendered without videos")
+    assert_light_changes_several_fold(d / "videos" / f"{camera}.mp4")
+
+
+def test_dusk_second_person_and_changing_light():
+    assert_second_person_in_every_view_and_changing_light("dusk", "cam2")
 
 
 # ---- lobby: held out like dusk, made before session 15 measured anything on it ------------------------
@@ -258,14 +262,7 @@ def test_lobby_arms_cross_both_ways_and_the_body_jumps():
 
 
 def test_lobby_second_person_and_changing_light():
-    d = scene_dir("lobby")
-    info = json.loads((d / "scene_info.json").read_text())
-    views = info["second_person"]["views"]
-    assert sorted(views) == sorted(info["cameras"])
-    assert all(v["in_view_fraction"] >= 0.9 for v in views.values())
-    if not (d / "videos").is_dir():
-        pytest.skip("lobby rendered without videos")
-    assert_light_changes_several_fold(d / "videos" / "cam3.mp4")
+    assert_second_person_in_every_view_and_changing_light("lobby", "cam3")
 
 
 # ---- actor: a body of other proportions than the subject the tracker is given (issue 15) ------------
