@@ -74,7 +74,7 @@ def measure(scene, step, raw):
                 out[name].append(np.where(ok[:, None], rest_offset @ axes.T / trunk, np.nan))
     finally:
         capture.close()
-    side = np.where((rig.landmarks % 2 == 1) | (rig.landmarks == 0), 1.0, -1.0)  # BlazePose: odd = left
+    side = np.where(rig.landmarks == _left_of_pair(rig.landmarks), 1.0, -1.0)
     result = {}
     for name, rows in out.items():
         a = np.array(rows)  # (F,K,3)
@@ -106,8 +106,7 @@ def medians(landmarks, offsets):
     sides; offsets (F,K,3) as `measure` returns them (NaN where a landmark did not triangulate)."""
     pairs = {}
     for k, lm in enumerate(landmarks):
-        key = int(lm if lm == 0 or lm % 2 else lm - 1)  # the left landmark's number for both sides
-        pairs.setdefault(key, []).append(offsets[:, k])
+        pairs.setdefault(int(_left_of_pair(lm)), []).append(offsets[:, k])
     out = {}
     for key, cols in sorted(pairs.items()):
         v = np.concatenate(cols)
@@ -115,6 +114,14 @@ def medians(landmarks, offsets):
         med = np.median(v, axis=0)
         out[key] = (med, np.median(np.abs(v - med), axis=0), len(v))
     return out
+
+
+def _left_of_pair(landmarks):
+    """The left landmark's number of each landmark's left/right pair (itself for the nose): the lower of the
+    two in BlazePose's numbering, as SWAP_ORDER pairs them."""
+    from markerless_mocap.core.features.learned import SWAP_ORDER
+
+    return np.minimum(landmarks, SWAP_ORDER[landmarks])
 
 
 def _print(table):
