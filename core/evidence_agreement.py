@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .features.learned import crop_around, locate
+from .evidence_crops import evidence_around
 from .overlay import model_mask
 
 MIN_VISIBILITY = 0.5
@@ -50,9 +50,7 @@ def result_agreement(body, proxy, cameras, read_frame, frames, poses, rig_points
     out = {cam.name: [] for cam in cameras}
     for frame, pose in zip(frames, poses):
         images = read_frame(int(frame))
-        joints = body.joint_positions(pose[None])[0]
-        frames_bgr = [images[c.name] for c in cameras]
-        evidence = locate(model, frames_bgr, [crop_around(c.project(joints)) for c in cameras])
+        evidence = evidence_around(model, body, cameras, [images[c.name] for c in cameras], pose)
         vertices = proxy.deform(body, pose[None])[0]
         points = rig_points.world(body, pose[None])[0]
         for cam, ev in zip(cameras, evidence):

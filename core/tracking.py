@@ -400,16 +400,15 @@ class Tracker:
 
     def observe(self, images, guide_poses):
         """Learned evidence per view, from crops around the projected joints of `guide_poses`."""
-        from .features.learned import LandmarkModel, crop_around, locate
+        from .evidence_crops import evidence_around
+        from .features.learned import LandmarkModel
 
         if self.landmark_model is None:
             self.landmark_model = LandmarkModel()
         cams = self.capture.cameras
-        joints = self.body.joint_positions(np.atleast_2d(guide_poses)).reshape(-1, 3)
-        boxes = [crop_around(cam.project(joints)) for cam in cams]
         frames = [images[cam.name] for cam in cams]
-        return locate(self.landmark_model, frames, boxes,
-                      foreground=lambda i: self.backgrounds[cams[i].name].silhouette(frames[i]))
+        return evidence_around(self.landmark_model, self.body, cams, frames, guide_poses,
+                               foreground=lambda i: self.backgrounds[cams[i].name].silhouette(frames[i]))
 
     def _guide_poses(self):
         """Where the person is expected this frame: the last estimate and its constant-velocity step."""

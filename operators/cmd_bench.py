@@ -133,7 +133,8 @@ def _capture_scene(folder, body, scale):
 def _learned_evidence_seconds(capture_dir, cameras, body, pose, repeats):
     """Seconds per frame of the learned evidence for every view: crops around the pose, one batched
     forward pass, landmarks and masks back in image pixels (the capture's frame 0, else grey images)."""
-    from ..core.features.learned import LandmarkModel, crop_around, locate
+    from ..core.evidence_crops import crops_around
+    from ..core.features.learned import LandmarkModel, locate
 
     images = None
     if capture_dir and Path(capture_dir).is_dir():
@@ -149,8 +150,7 @@ def _learned_evidence_seconds(capture_dir, cameras, body, pose, repeats):
     if images is None:
         images = [np.full((c.height, c.width, 3), 128, np.uint8) for c in cameras]
     model = LandmarkModel()
-    joints = body.joint_positions(pose[None])[0]
-    boxes = [crop_around(c.project(joints)) for c in cameras]
+    boxes = crops_around(body, cameras, pose)
     model.evidence(images, boxes)  # warm up
     return _best(lambda: locate(model, images, boxes), repeats)
 

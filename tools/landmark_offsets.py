@@ -32,7 +32,8 @@ def measure(scene, step, raw):
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
     from markerless_mocap.core.body import body_frame
     from markerless_mocap.core.capture.capture import load_capture
-    from markerless_mocap.core.features.learned import LandmarkModel, crop_around, locate
+    from markerless_mocap.core.evidence_crops import evidence_around
+    from markerless_mocap.core.features.learned import LandmarkModel
     from markerless_mocap.core.keypoint_fit import triangulated_landmarks
     from markerless_mocap.core.keypoints import rig_keypoints
     from markerless_mocap.core.pose_fitting import poses_from_joints
@@ -60,9 +61,8 @@ def measure(scene, step, raw):
     try:
         for pose, f in zip(poses, np.asarray(frames)[picks]):
             images = capture.frames.read(int(f))
-            joints = body.joint_positions(pose[None])[0]
-            boxes = [crop_around(cam.project(joints)) for cam in capture.cameras]  # as the tracker places them
-            evidence = locate(model, [images[c.name] for c in capture.cameras], boxes)
+            evidence = evidence_around(model, body, capture.cameras, [images[c.name] for c in capture.cameras],
+                                       pose)  # as the tracker places the crops
             uv = np.stack([ev.keypoints for ev in evidence])
             vis = np.stack([ev.visibility if ev.found else np.zeros_like(ev.visibility) for ev in evidence])
             X, ok = triangulated_landmarks(capture.cameras, targets_from_landmarks(uv, vis, rig), rig)
