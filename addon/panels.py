@@ -110,6 +110,7 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         col.prop(props, "iterations")
         settings.prop(props, "seed")
         settings.prop(props, "refine")
+        settings.prop(props, "smoothing_hz", text="Smoothing (Hz)")
         settings.prop(props, "backend")
         if props.backend_used:  # what the last Track chose (auto probes the GPU), wrapped: a label does not wrap
             _wrapped(settings, f"Using: {props.backend_used}", context, icon="INFO")

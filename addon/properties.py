@@ -7,6 +7,8 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
+from ..core.smoothing import DEFAULT_CUTOFF_HZ
+
 ALGORITHMS = (
     ("isa", "ISA", "Interacting simulated annealing: global optimisation with a particle set (the paper's best, default)"),
     ("apf", "APF", "Annealed particle filter: layered annealing of a particle set"),
@@ -112,6 +114,10 @@ class MocapSettings(bpy.types.PropertyGroup):
     refine: BoolProperty(name="Refine Locally", default=True,
                          description="After the search, fit the silhouette outlines locally (ICP): "
                                      "less jitter, about a second more per frame")
+    smoothing_hz: FloatProperty(name="Smoothing", default=DEFAULT_CUTOFF_HZ, min=0.0, soft_max=12.0, precision=1,
+                                description="When the take is solved, low-pass its motion at this many Hz (less "
+                                            "jitter; 0: keep every frame as solved). The solved poses stay in "
+                                            "joints_raw.npz / poses_raw.npz in the output folder")
     backend: EnumProperty(name="Backend", items=BACKENDS, default="auto",
                           description="How poses are rendered and compared with the images")
     use_frame_range: BoolProperty(name="Limit Frames", default=False,

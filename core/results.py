@@ -3,6 +3,8 @@ any reason keeps what it solved, and `--resume` continues from the checkpoint ex
 
     joints.npz   names, frames, positions (F,J,3) world metres (every bone's head)
     poses.npz    dof_names, frames, poses (F,D)
+    joints_raw.npz, poses_raw.npz  once a finished take is smoothed (core/smoothing.py): the poses as solved;
+                 joints.npz and poses.npz then hold the smoothed take
     keypoints.npz  with learned evidence: frames, cameras, uv (F,C,33,2) image pixels, visibility (F,C,33)
     report.json  settings, seed, per-frame energy and seconds, totals, software versions
     checkpoint.pkl  the tracker's state after the last solved frame (optimiser particles, RNG, colour model)
@@ -98,15 +100,35 @@ class ResultWriter:
             kept = "no frame was saved; free space or choose another result folder"
         return ResultWriteError(f"could not write frame {frame} to {self.out}: {why}; {kept}", exc.errno)
 
-    def write(self):
-        est = self.estimates
-        frames = np.array([e.frame for e in est], dtype=np.int64)
+    def _write_motion(self, poses, joints, suffix=""):
+        """joints{suffix}.npz and poses{suffix}.npz for the estimates' frames."""
+        frames = np.array([e.frame for e in self.estimates], dtype=np.int64)
         names = np.array(self.body.skeleton.bone_names)
-        joints = np.array([e.joints for e in est]).reshape(len(est), len(names), 3)
-        poses = np.array([e.pose for e in est]).reshape(len(est), self.body.n_dof)
-        _atomic_write(self.out / "joints.npz", lambda fh: np.savez(fh, names=names, frames=frames, positions=joints))
-        _atomic_write(self.out / "poses.npz", lambda fh: np.savez(
+        joints = np.asarray(joints).reshape(len(frames), len(names), 3)
+        poses = np.asarray(poses).reshape(len(frames), self.body.n_dof)
+        _atomic_write(self.out / f"joints{suffix}.npz",
+                      lambda fh: np.savez(fh, names=names, frames=frames, positions=joints))
+        _atomic_write(self.out / f"poses{suffix}.npz", lambda fh: np.savez(
             fh, dof_names=np.array(self.body.dof_names), frames=frames, poses=poses))
+
+    def write_smoothed(self, poses, joints, smoothing):
+        """The finished take's smoothed poses and joints become poses.npz and joints.npz; the solved ones are
+        kept as poses_raw.npz and joints_raw.npz; report.json says how it was smoothed (`smoothing`)."""
+        est = self.estimates
+        self._write_motion([e.pose for e in est], [e.joints for e in est], "_raw")
+        self.info["smoothing"] = dict(smoothing)
+        self.write(motion=(poses, joints))
+
+    def write(self, motion=None):
+        """Every result file for the estimates so far; `motion`: (poses, joints) to write instead of the
+        solved ones (a smoothed take)."""
+        est = self.estimates
+        if motion is None:  # the solved poses: a smoothing of an earlier finish no longer holds
+            motion = ([e.pose for e in est], [e.joints for e in est])
+            self.info.pop("smoothing", None)
+            for stale in ("joints_raw.npz", "poses_raw.npz"):
+                (self.out / stale).unlink(missing_ok=True)
+        self._write_motion(*motion)
         with_landmarks = [e for e in est if getattr(e, "landmarks", None) is not None]
         if with_landmarks:  # the learned 2D evidence each frame was solved with
             _atomic_write(self.out / "keypoints.npz", lambda fh: np.savez(

@@ -4,6 +4,7 @@ import time
 from pathlib import Path
 
 from ..core.likelihood import LIKELIHOODS
+from ..core.smoothing import DEFAULT_CUTOFF_HZ
 from ..core.tracking import PRESETS, TrackingSettings
 
 ALGORITHMS = ("isa", "apf", "pf", "fsa", "icp")
@@ -71,6 +72,9 @@ def add_arguments(p):
     p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 20 tracked)")
     p.add_argument("--calibrate-landmarks-only", action="store_true",
                    help="--calibrate from the landmarks alone (default: then refined against the person masks)")
+    p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
+                   help=f"low-pass the finished take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: keep the poses as "
+                        "solved); the solved poses stay in joints_raw.npz / poses_raw.npz")
     add_tracking_options(p)
 
 
@@ -174,7 +178,8 @@ def run(args):
         actor = load_actor_option(args, scene, armature, choice.used)
         session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args, choice.used),
                                frames=parse_frames(args.frames), resume=args.resume,
-                               log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), actor=actor)
+                               log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), actor=actor,
+                               smooth_hz=args.smooth)
     except (SubjectError, ValueError, FileNotFoundError, ResultWriteError) as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2

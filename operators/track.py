@@ -88,7 +88,8 @@ def build_session(context, log=None, step=None):
         extra["actor"] = load_actor(bpy.path.abspath(props.actor_file))
     session = _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
                                frames=props.frame_range(), resume=props.resume, log=log, step=step,
-                               units=None if props.units == "auto" else props.units, **extra)
+                               units=None if props.units == "auto" else props.units, smooth_hz=props.smoothing_hz,
+                               **extra)
     writer = getattr(session, "writer", None)
     if writer is not None:
         writer.info["backend"] = choice.to_dict()  # report.json
@@ -318,7 +319,8 @@ class MOCAP_OT_track(bpy.types.Operator):
             props.status = f"Cancelled after {solved} frames (keys kept)"
             self.report({"WARNING"}, f"Tracking cancelled after {solved} frames; their keys are kept")
             return {"CANCELLED"}
-        props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame"
+        smoothed = f", smoothed at {props.smoothing_hz:g} Hz" if summary and "joints_raw" in summary else ""
+        props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame{smoothed}"
         self.report({"INFO"}, f"Tracked {solved} frames; results in {props.last_output}")
         return {"FINISHED"}
 

@@ -15,6 +15,7 @@ from ..core.capture.capture import load_capture
 from ..core.features.learned import require_model
 from ..core.likelihood import resolve_weights
 from ..core.results import ResultWriter, atomic_path
+from ..core.smoothing import DEFAULT_CUTOFF_HZ, MIN_RUN, check_cutoff, smooth_poses
 from ..core.tracking import Tracker, TrackingSettings
 
 
@@ -34,7 +35,8 @@ def _blender_version():
 
 class TrackSession:
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 mesh_obj=None, frame_offset=None, prior=None, log=None, units=None, step=None, actor=None):
+                 mesh_obj=None, frame_offset=None, prior=None, log=None, units=None, step=None, actor=None,
+                 smooth_hz=DEFAULT_CUTOFF_HZ):
         self.scene = scene
         self.armature = armature_obj
         self.settings = settings or TrackingSettings()
@@ -66,6 +68,14 @@ class TrackSession:
         except ValueError:
             self.capture.close()
             raise
+        # The finished take is low-passed at this cut-off (core/smoothing.py; 0 or None: keyed as solved).
+        self.smooth_hz = float(smooth_hz or 0.0)
+        if self.smooth_hz:
+            try:
+                check_cutoff(self.smooth_hz, self.capture.frames.fps)
+            except ValueError:
+                self.capture.close()
+                raise
         self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
         self.rough_pose = self.body.default_pose()  # the subject as the user placed it
         self.capture_dir = capture_dir
@@ -90,6 +100,7 @@ class TrackSession:
                 self.frames = [f for f in self.all_frames if f not in solved]
                 self.log(f"resuming after frame {done[-1].frame}: {len(done)} frames already solved")
         self._cancel = threading.Event()
+        self.smoothed_poses = None  # set by smooth()
 
     def _keep_actor_file(self, actor):
         """The result folder keeps the calibration it was tracked with (evaluate and later takes read it)."""
@@ -164,19 +175,42 @@ class TrackSession:
     def scene_frame(self, capture_frame):
         return capture_frame + self.frame_offset
 
-    def character_pose(self, pose):
+    def character_pose(self, pose, first=None):
         """The pose the character is keyed with: the solved pose, or with an actor calibration the actor's
-        rotations with the root path rescaled to the character (about the first solved frame's root)."""
+        rotations with the root path rescaled to the character (about the root of `first`, by default the
+        first solved frame's pose)."""
         if self.actor is None:
             return pose
         from ..core.proportions import character_poses
 
-        first = self.writer.estimates[0].pose[self.body.translation_dofs[:2]] if self.writer.estimates else None
-        return character_poses(self.body, self.character, np.atleast_2d(pose), anchor_xy=first)[0]
+        if first is None and self.writer.estimates:
+            first = self.writer.estimates[0].pose
+        anchor = None if first is None else first[self.body.translation_dofs[:2]]
+        return character_poses(self.body, self.character, np.atleast_2d(pose), anchor_xy=anchor)[0]
 
     def key(self, estimate):
-        scene_bridge.key_pose(self.armature, self.character, self.character_pose(estimate.pose),
-                              self.scene_frame(estimate.frame))
+        self._key_pose(estimate.frame, estimate.pose)
+
+    def _key_pose(self, frame, pose, first=None):
+        scene_bridge.key_pose(self.armature, self.character, self.character_pose(pose, first), self.scene_frame(frame))
+
+    def smooth(self):
+        """Low-pass the solved take (core/smoothing.py): joints.npz and poses.npz become the smoothed take (the
+        solved ones stay as *_raw.npz) and the character is keyed with it. Main thread (keys). Returns the
+        smoothed poses, or None when smoothing is off or too few frames are solved."""
+        est = self.writer.estimates
+        if not self.smooth_hz or len(est) < MIN_RUN:
+            return None
+        frames = np.array([e.frame for e in est])
+        poses = smooth_poses(self.body, np.array([e.pose for e in est]), frames, self.capture.frames.fps,
+                             self.smooth_hz)
+        self.writer.write_smoothed(poses, self.body.joint_positions(poses), {
+            "cutoff_hz": self.smooth_hz, "filter": "Butterworth low-pass, 2nd order, forwards and backwards",
+            "raw": ["joints_raw.npz", "poses_raw.npz"]})
+        for frame, pose in zip(frames, poses):
+            self._key_pose(frame, pose, first=poses[0])
+        self.smoothed_poses = poses
+        return poses
 
     def key_all(self):
         for est in self.writer.estimates:
@@ -191,6 +225,8 @@ class TrackSession:
         est = self.writer.estimates
         if not est:
             return written
+        if self.smooth() is not None:
+            written.update(joints_raw=out / "joints_raw.npz", poses_raw=out / "poses_raw.npz")
         frames = (self.scene_frame(est[0].frame), self.scene_frame(est[-1].frame))
         self.scene.frame_start, self.scene.frame_end = frames
         if export:
@@ -218,9 +254,12 @@ class TrackSession:
 
         proxy = self.prepare().proxy
         writer = OverlayWriter(self.writer.out, self.capture.cameras, self.capture.frames.fps)
+        solved = self.writer.estimates
+        smoothed = self.smoothed_poses
+        poses = smoothed if smoothed is not None and len(smoothed) == len(solved) else [e.pose for e in solved]
         try:
-            for est in self.writer.estimates:
-                verts = proxy.deform(self.body, est.pose[None])[0]
+            for est, pose in zip(solved, poses):
+                verts = proxy.deform(self.body, pose[None])[0]
                 writer.add(self.capture.frames.read(est.frame), verts, proxy.faces, proxy.face_part,
                            len(proxy.part_names), label=f"frame {est.frame}  V={est.energy:.3f}",
                            landmarks=getattr(est, "landmarks", None),

@@ -186,7 +186,7 @@ def test_panels_draw_settings_state_and_buttons(addon_module_name, bpy_module):
     log = _draw_all(bpy)
     props = {entry[1] for entry in log if entry[0] == "prop"}
     assert {"capture_dir", "units", "armature", "algorithm", "likelihood", "preset", "particles", "iterations", "seed",
-            "backend", "use_frame_range", "frame_start", "frame_end", "output_dir"} <= props
+            "backend", "smoothing_hz", "use_frame_range", "frame_start", "frame_end", "output_dir"} <= props
     ops = {entry[1] for entry in log if entry[0] == "operator"}
     assert ops == {"mocap.import_capture", "mocap.check_subject", "mocap.track", "mocap.export_fbx",
                    "mocap.export_bvh"}
@@ -270,11 +270,11 @@ class FakeSession:
     block_at = None  # index of the frame whose solve waits for `release`
 
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 log=None, units=None, step=None):
+                 log=None, units=None, step=None, smooth_hz=None):
         FakeSession.last = self
         self.step = step or (lambda text, fraction: None)
         self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume,
-                         units=units)
+                         units=units, smooth_hz=smooth_hz)
         self.scene, self.armature = scene, armature_obj
         self.frames = list(frames) if frames is not None else [0, 1, 2]
         self.n_total = len(self.frames)
@@ -342,9 +342,12 @@ def test_track_execute_keys_every_frame_and_finishes(fake_track):
     m = bpy.context.scene.mocap
     m.algorithm, m.likelihood, m.particles, m.iterations, m.seed, m.backend = "apf", "silhch+color", 50, 4, 7, "numpy"
     m.use_frame_range, m.frame_start, m.frame_end = True, 2, 4
+    assert m.smoothing_hz == 8.0  # the default cut-off (core/smoothing.py)
+    m.smoothing_hz = 5.5
     assert bpy.ops.mocap.track() == {"FINISHED"}
 
     session = FakeSession.last
+    assert session.args["smooth_hz"] == 5.5
     s = session.args["settings"]
     assert (s.algorithm, s.likelihood, s.particles, s.iterations, s.seed, s.backend) == (
         "apf", "silhch+color", 50, 4, 7, "numpy")
