@@ -1,7 +1,7 @@
 """Temporal smoothing of a solved take: a zero-phase low-pass filter over each degree of freedom.
 
 Each frame is solved on its own evidence, so the solved poses jitter from frame to frame: on the sample
-scenes the 15 joints' mean acceleration is 1.4-1.9x the true motion's (walk 13.2 against 7.7 m/s^2,
+scenes the 15 joints' mean acceleration is 1.3-1.9x the true motion's (walk 13.2 against 7.7 m/s^2,
 busy 26.3 against 13.8). A Butterworth low-pass (2nd order, run forwards and backwards: 4th order, no lag)
 at DEFAULT_CUTOFF_HZ brings it to about the truth's level and lowers the mean joint error a little on every
 scene (0.2-0.5 mm at 8 Hz; 6 Hz ties, 4 Hz and below cost 0.3-1.6 mm, 3 Hz 2-4 mm: the filter cuts real

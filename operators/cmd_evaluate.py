@@ -37,7 +37,13 @@ def _print_truth(args):
     print(f"PCK@50mm {summary.pck50:.3f}  PCK@100mm {summary.pck100:.3f}")
     print("per joint (mm): " + ", ".join(f"{k} {v:.0f}" for k, v in summary.per_joint_mm.items()))
     print(f"plot: {plot}")
-    print(summary.json_line(result=str(args.result)))
+    extra = {}
+    raw = Path(args.result) / "joints_raw.npz"
+    if raw.is_file():  # a smoothed take: the poses as solved, for comparison
+        _, raw_errors = joint_errors(raw, args.truth)
+        extra["raw_mean_mm"] = float(1000 * raw_errors.mean())
+        print(f"as solved, before smoothing (joints_raw.npz): {extra['raw_mean_mm']:.1f} mm")
+    print(summary.json_line(result=str(args.result), **extra))
 
 
 def _print_triangulation(args):

@@ -197,9 +197,13 @@ class TrackSession:
     def smooth(self):
         """Low-pass the solved take (core/smoothing.py): joints.npz and poses.npz become the smoothed take (the
         solved ones stay as *_raw.npz) and the character is keyed with it. Main thread (keys). Returns the
-        smoothed poses, or None when smoothing is off or too few frames are solved."""
+        smoothed poses, or None when smoothing is off or too few frames are solved. A finished take resumed with
+        another cut-off (`track --resume --smooth HZ`: nothing left to solve) is smoothed again from the solved
+        poses; with 0, its files go back to the solved poses."""
         est = self.writer.estimates
         if not self.smooth_hz or len(est) < MIN_RUN:
+            if (self.writer.out / "joints_raw.npz").exists():  # a finished run smoothed: the solved take again
+                self.writer.write()
             return None
         frames = np.array([e.frame for e in est])
         poses = smooth_poses(self.body, np.array([e.pose for e in est]), frames, self.capture.frames.fps,

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from markerless_mocap.core.evaluation import EVAL_JOINTS, EvaluationError, joint_errors, summarise
+from markerless_mocap.core.results import load_joints
 from markerless_mocap.operators.cli import main
 
 NAMES = ["Hips", "LeftUpLeg", "RightUpLeg", "LeftLeg", "RightLeg", "LeftFoot", "RightFoot", "LeftArm", "RightArm",
@@ -51,7 +52,20 @@ def test_evaluate_command_prints_json_and_plot(truth_and_result, capsys):
     out = capsys.readouterr().out.strip().splitlines()
     figures = json.loads(out[-1])
     assert figures["mean_mm"] == pytest.approx(80 / 9 + 160 / 9)
+    assert "raw_mean_mm" not in figures
     assert (truth_and_result / "result" / "error_per_frame.png").stat().st_size > 1000
+
+
+def test_evaluate_also_scores_the_solved_poses_of_a_smoothed_take(truth_and_result, capsys):
+    result = truth_and_result / "result"
+    names, frames, positions = load_joints(result / "joints.npz")
+    write_joints(result / "joints_raw.npz", positions + np.array([0.03, 0.0, 0.0]), frames, names)
+    assert main(["evaluate", "--result", str(result), "--truth", str(truth_and_result / "gt.npz")]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    figures = json.loads(out[-1])
+    assert figures["mean_mm"] == pytest.approx(80 / 9 + 160 / 9)  # joints.npz: the take as delivered
+    assert figures["raw_mean_mm"] == pytest.approx((110 + 8 * 50) / 9)  # 30 mm further along x
+    assert f"as solved, before smoothing (joints_raw.npz): {figures['raw_mean_mm']:.1f} mm" in out
 
 
 def test_missing_joint_is_named(tmp_path):

@@ -138,3 +138,17 @@ def test_a_tracked_take_is_smoothed_keyed_and_the_solved_poses_are_kept(tmp_path
     report = json.loads((out / "report.json").read_text())
     assert report["smoothing"]["cutoff_hz"] == 6.0
     assert (out / "animation.bvh").is_file() and (out / "tracked.blend").is_file()
+
+    # Another cut-off without tracking again: resume the finished take; 0 gives back the solved poses.
+    args = ["track", "--scene", str(scene_dir("walk") / "subject.blend"), "--capture", str(scene_dir("walk")),
+            "--out", str(out), "--frames", "0-9", "--particles", "10", "--iterations", "2", "--likelihood",
+            "silh+edge", "--no-overlays", "--resume"]
+    assert main(args + ["--smooth", "3"]) == 0
+    np.testing.assert_allclose(np.load(out / "poses.npz")["poses"],
+                               smooth_poses(body, poses_raw["poses"], poses_raw["frames"], FPS, 3.0), atol=1e-12)
+    np.testing.assert_array_equal(np.load(out / "poses_raw.npz")["poses"], poses_raw["poses"])
+    assert main(args + ["--smooth", "0"]) == 0
+    np.testing.assert_array_equal(np.load(out / "poses.npz")["poses"], poses_raw["poses"])
+    np.testing.assert_array_equal(np.load(out / "joints.npz")["positions"], raw["positions"])
+    assert not (out / "poses_raw.npz").exists() and not (out / "joints_raw.npz").exists()
+    assert "smoothing" not in json.loads((out / "report.json").read_text())
