@@ -49,8 +49,9 @@ RECOVERY_DISTANCE_3D = 0.15  # metres
 # with the arms crossed (busy frame 40, tools/local_fit_from_truth.py) the fit walked the left wrist 0.12 m away,
 # and without the prior it stayed within 0.04 m. Measured, default pipeline, whole clips, seeds 0-2, smoothed:
 # at 1.0 walk 16.3 -> 14.7 mm, playground 14.3 -> 13.6, busy 30.7 -> 27.8, held-out dusk 29.9 -> 25.9 and lobby
-# 34.9 -> 32.9 (every seed of every scene better but lobby seed 0: 34.6 -> 34.8); 0.5 on seed 0 only: 22.3 mm mean over the five scenes
-# against 22.8 at 1.0 (not yet adopted: three seeds wanted).
+# 34.9 -> 32.9 (every seed of every scene better but lobby seed 0: 34.6 -> 34.8). At 0.5 (seeds 0-2, measured last
+# in session 16): 13.9 / 13.4 / 27.3 / 24.3 / 31.1 mm, better still; not adopted yet because every other figure in
+# the README (preview, compare, calibration, Pose2Sim) was measured at 1.0.
 LOCAL_FIT_PRIOR_WEIGHT = 1.0
 # Where the optimisers keep poses between frames (expressed relative to the anchor): these, and
 # only these, are re-expressed when the anchor moves. Scales and floors must not be touched.
