@@ -65,6 +65,8 @@ def software_versions():
 
 
 class ResultWriter:
+    RAW_FILES = ("joints_raw.npz", "poses_raw.npz")  # the solved take, beside a smoothed joints.npz / poses.npz
+
     def __init__(self, out_dir, body, settings, info=None, blender_version=None):
         self.out = require_writable_folder(out_dir)
         self.body = body
@@ -116,8 +118,13 @@ class ResultWriter:
         kept as poses_raw.npz and joints_raw.npz; report.json says how it was smoothed (`smoothing`)."""
         est = self.estimates
         self._write_motion([e.pose for e in est], [e.joints for e in est], "_raw")
-        self.info["smoothing"] = dict(smoothing)
+        self.info["smoothing"] = {**smoothing, "raw": list(self.RAW_FILES)}
         self.write(motion=(poses, joints))
+
+    @property
+    def holds_smoothed_take(self):
+        """Whether the folder's joints.npz / poses.npz are a smoothed take (the solved one in RAW_FILES)."""
+        return any((self.out / name).exists() for name in self.RAW_FILES)
 
     def write(self, motion=None):
         """Every result file for the estimates so far; `motion`: (poses, joints) to write instead of the
@@ -126,7 +133,7 @@ class ResultWriter:
         if motion is None:  # the solved poses: a smoothing of an earlier finish no longer holds
             motion = ([e.pose for e in est], [e.joints for e in est])
             self.info.pop("smoothing", None)
-            for stale in ("joints_raw.npz", "poses_raw.npz"):
+            for stale in self.RAW_FILES:
                 (self.out / stale).unlink(missing_ok=True)
         self._write_motion(*motion)
         with_landmarks = [e for e in est if getattr(e, "landmarks", None) is not None]

@@ -5,7 +5,7 @@ scenes the 15 joints' mean acceleration is 1.3-1.9x the true motion's (walk 13.2
 busy 26.3 against 13.8). A Butterworth low-pass (2nd order, run forwards and backwards: 4th order, no lag)
 at DEFAULT_CUTOFF_HZ brings it to about the truth's level and lowers the mean joint error a little on every
 scene (0.2-0.5 mm at 8 Hz; 6 Hz ties, 4 Hz and below cost 0.3-1.6 mm, 3 Hz 2-4 mm: the filter cuts real
-motion). Measured on results of all five rendered scenes, seeds 0-2 (README, "Smoothing").
+motion). Measured on results of all five rendered scenes, seeds 0-2 (README, "How it tracks", step 3).
 
 It works on the DOF vectors, so every bone keeps its length; the joint angles stay within their limits; the
 root orientation is filtered as a unit quaternion with a consistent sign (a rotation vector jumps where the

@@ -202,15 +202,14 @@ class TrackSession:
         poses; with 0, its files go back to the solved poses."""
         est = self.writer.estimates
         if not self.smooth_hz or len(est) < MIN_RUN:
-            if (self.writer.out / "joints_raw.npz").exists():  # a finished run smoothed: the solved take again
+            if self.writer.holds_smoothed_take:  # a finished run smoothed: the solved take again
                 self.writer.write()
             return None
         frames = np.array([e.frame for e in est])
         poses = smooth_poses(self.body, np.array([e.pose for e in est]), frames, self.capture.frames.fps,
                              self.smooth_hz)
         self.writer.write_smoothed(poses, self.body.joint_positions(poses), {
-            "cutoff_hz": self.smooth_hz, "filter": "Butterworth low-pass, 2nd order, forwards and backwards",
-            "raw": ["joints_raw.npz", "poses_raw.npz"]})
+            "cutoff_hz": self.smooth_hz, "filter": "Butterworth low-pass, 2nd order, forwards and backwards"})
         for frame, pose in zip(frames, poses):
             self._key_pose(frame, pose, first=poses[0])
         self.smoothed_poses = poses
@@ -230,7 +229,7 @@ class TrackSession:
         if not est:
             return written
         if self.smooth() is not None:
-            written.update(joints_raw=out / "joints_raw.npz", poses_raw=out / "poses_raw.npz")
+            written.update({name.removesuffix(".npz"): out / name for name in self.writer.RAW_FILES})
         frames = (self.scene_frame(est[0].frame), self.scene_frame(est[-1].frame))
         self.scene.frame_start, self.scene.frame_end = frames
         if export:
