@@ -47,12 +47,10 @@ RECOVERY_DISTANCE_3D = 0.15  # metres
 # The anatomical prior's weight in the local fit after the search (IcpSettings.prior_weight; the paper's ICP
 # optimiser keeps lambda_anat = 2). At 2 it pulled fitted limbs towards common poses: started AT the true pose
 # with the arms crossed (busy frame 40, tools/local_fit_from_truth.py) the fit walked the left wrist 0.12 m away,
-# and without the prior it stayed within 0.04 m. Measured, default pipeline, whole clips, seeds 0-2, smoothed:
-# at 1.0 walk 16.3 -> 14.7 mm, playground 14.3 -> 13.6, busy 30.7 -> 27.8, held-out dusk 29.9 -> 25.9 and lobby
-# 34.9 -> 32.9 (every seed of every scene better but lobby seed 0: 34.6 -> 34.8). At 0.5 (seeds 0-2, measured last
-# in session 16): 13.9 / 13.4 / 27.3 / 24.3 / 31.1 mm, better still; not adopted yet because every other figure in
-# the README (preview, compare, calibration, Pose2Sim) was measured at 1.0.
-LOCAL_FIT_PRIOR_WEIGHT = 1.0
+# and without the prior it stayed within 0.04 m. Measured, default pipeline, whole clips, seeds 0-2, smoothed
+# (walk / playground / busy / held-out dusk / lobby): at 2: 16.3 / 14.3 / 30.7 / 29.9 / 34.9 mm; at 1:
+# 14.7 / 13.6 / 27.8 / 25.9 / 32.9; at 0.5: 13.9 / 13.4 / 27.3 / 24.3 / 31.1 (better on every scene).
+LOCAL_FIT_PRIOR_WEIGHT = 0.5
 # Where the optimisers keep poses between frames (expressed relative to the anchor): these, and
 # only these, are re-expressed when the anchor moves. Scales and floors must not be touched.
 POSE_STATE_ATTRIBUTES = ("x0", "particles", "state", "hist")
