@@ -320,7 +320,12 @@ class MOCAP_OT_track(bpy.types.Operator):
             self.report({"WARNING"}, f"Tracking cancelled after {solved} frames; their keys are kept")
             return {"CANCELLED"}
         smoothed = f", smoothed at {props.smoothing_hz:g} Hz" if summary and "joints_raw" in summary else ""
-        props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame{smoothed}"
+        if solved == 0 and job._done_before:  # a finished take resumed: only the smoothing ran again
+            again = (f"smoothed again at {props.smoothing_hz:g} Hz" if smoothed else
+                     "rewritten as solved (no smoothing)")
+            props.status = f"All {job._done_before} frames were already tracked; the take {again}"
+        else:
+            props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame{smoothed}"
         self.report({"INFO"}, f"Tracked {solved} frames; results in {props.last_output}")
         return {"FINISHED"}
 

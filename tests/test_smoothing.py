@@ -1,6 +1,7 @@
 """Smoothing of a finished take (core/smoothing.py): the filter's measured response, the root orientation
 through 180 degrees, gaps and short runs, joint limits, a cut-off the frame rate cannot carry, and a tracked
-take that is keyed, exported and saved smoothed with the solved poses kept."""
+take that is keyed, exported and saved smoothed with the solved poses kept, and smoothed again with another
+cut-off from the command line and from the Track panel without tracking again."""
 from types import SimpleNamespace
 
 import numpy as np
@@ -152,3 +153,44 @@ def test_a_tracked_take_is_smoothed_keyed_and_the_solved_poses_are_kept(tmp_path
     np.testing.assert_array_equal(np.load(out / "joints.npz")["positions"], raw["positions"])
     assert not (out / "poses_raw.npz").exists() and not (out / "joints_raw.npz").exists()
     assert "smoothing" not in json.loads((out / "report.json").read_text())
+
+
+def test_the_track_panel_resmooths_a_finished_take_with_its_new_cutoff(addon_module_name, bpy_module, tmp_path):
+    """Track panel: *Resume* on a finished output folder with another *Smoothing* value smooths the solved
+    take again (the same finish as `track --resume --smooth`), keys it and says so, without tracking again."""
+    from scene_helpers import scene_dir
+
+    from markerless_mocap.addon.scene_bridge import blender_joint_positions, body_from_blender, find_armature
+
+    bpy = bpy_module
+    walk = scene_dir("walk")
+    bpy.ops.wm.open_mainfile(filepath=str(walk / "subject.blend"))
+    m = bpy.context.scene.mocap
+    out = tmp_path / "out"
+    m.capture_dir, m.output_dir = str(walk), str(out)
+    m.use_frame_range, m.frame_start, m.frame_end = True, 0, 7
+    m.likelihood, m.particles, m.iterations, m.smoothing_hz = "silh+edge", 10, 2, 6.0
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert "smoothed at 6 Hz" in m.status
+    raw = np.load(out / "poses_raw.npz")
+
+    m.resume, m.smoothing_hz = True, 3.0
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert m.status == "All 8 frames were already tracked; the take smoothed again at 3 Hz"
+    scene = bpy.context.scene
+    arm = find_armature(scene)
+    body = body_from_blender(arm, None, scene)
+    expected = smooth_poses(body, raw["poses"], raw["frames"], FPS, 3.0)
+    np.testing.assert_allclose(np.load(out / "poses.npz")["poses"], expected, atol=1e-12)
+    np.testing.assert_array_equal(np.load(out / "poses_raw.npz")["poses"], raw["poses"])  # not solved again
+    joints = np.load(out / "joints.npz")
+    names = [str(n) for n in joints["names"]]
+    order = [names.index(b.name) for b in arm.data.bones]
+    for k, frame in enumerate(joints["frames"]):
+        scene.frame_set(int(frame) + scene.frame_start)
+        np.testing.assert_allclose(blender_joint_positions(arm), body.joint_positions(expected[k:k + 1])[0][order],
+                                   atol=1e-4)
+    m.smoothing_hz = 0.0  # and back to the solved poses
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert m.status == "All 8 frames were already tracked; the take rewritten as solved (no smoothing)"
+    np.testing.assert_array_equal(np.load(out / "poses.npz")["poses"], raw["poses"])
