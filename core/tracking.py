@@ -49,7 +49,8 @@ RECOVERY_DISTANCE_3D = 0.15  # metres
 # with the arms crossed (busy frame 40, tools/local_fit_from_truth.py) the fit walked the left wrist 0.12 m away,
 # and without the prior it stayed within 0.04 m. Measured, default pipeline, whole clips, seeds 0-2, smoothed
 # (walk / playground / busy / held-out dusk / lobby): at 2: 16.3 / 14.3 / 30.7 / 29.9 / 34.9 mm; at 1:
-# 14.7 / 13.6 / 27.8 / 25.9 / 32.9; at 0.5: 13.9 / 13.4 / 27.3 / 24.3 / 31.1 (better on every scene).
+# 14.7 / 13.6 / 27.8 / 25.9 / 32.9; at 0.5: 13.9 / 13.4 / 27.3 / 24.4 / 31.1 (better on every scene); at 0.25:
+# 13.5 / 13.1 / 26.8 / 23.6 / 32.1 (the held-out scenes split, so 0.5 stays). The search's prior was 2 in all of these.
 LOCAL_FIT_PRIOR_WEIGHT = 0.5
 # Where the optimisers keep poses between frames (expressed relative to the anchor): these, and
 # only these, are re-expressed when the anchor moves. Scales and floors must not be touched.
