@@ -8,8 +8,8 @@ is not enough: with the arms crossed (busy, frames 34-44) such fits land 0.1-0.3
 energies compared at them blame the energy wrongly (session 16 found an earlier diagnosis built on that).
 
 If the truth costs less than the tracked pose and the local fit stays there, the search missed it; if the truth
-costs more, or the local fit walks away from it, the energy's minimum is elsewhere. `--without` repeats the
-local fit without the keypoints or the prior, to see which term pulls.
+costs more, or the local fit walks away from it, the energy's minimum is elsewhere. The local fit is repeated
+without the keypoints and without the prior, to see which term pulls.
 
     .venv/bin/python tools/local_fit_from_truth.py sample_scenes/busy RESULT 34,38,40,44 [--seed 0]
 """
