@@ -4,7 +4,8 @@
 
 Drives the Mocap sidebar the way a user would, through operators and timers: Import the capture, Check
 the rig, Calibrate Actor (modal, 3 frames), Track (the modal operator, a few frames, with the calibration), Esc to cancel (a simulated key press, as a user's
-would arrive), then Export FBX and BVH. Takes a screenshot at each step into OUT, writes OUT/ui_report.json
+would arrive), Resume for two more frames, Resume again with another Smoothing value (the finished take
+smoothed again), then Export FBX and BVH. Takes a screenshot at each step into OUT, writes OUT/ui_report.json
 and quits; the stage checks the report. Everything here runs on Blender's main thread (timers).
 """
 import json
@@ -212,24 +213,63 @@ def step_watch():
         log(f"Esc pressed at {m.frames_solved} frames solved")
         return 0.2
     if state.get("esc_sent") and not m.is_tracking:
-        arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-        action = arm.animation_data.action if arm.animation_data else None
-        frames = set()
-        if action is not None:
-            curves = getattr(action, "fcurves", None)
-            if curves is None or len(curves) == 0:
-                from bpy_extras.anim_utils import action_get_channelbag_for_slot
-                curves = action_get_channelbag_for_slot(action, arm.animation_data.action_slot).fcurves
-            for fc in curves:
-                frames.update(int(k.co[0]) for k in fc.keyframe_points)
-        report["cancel"] = {"status": m.status, "frames_solved": m.frames_solved, "keyed_frames": sorted(frames),
+        frames = keyed_frames()
+        report["cancel"] = {"status": m.status, "frames_solved": m.frames_solved, "keyed_frames": frames,
                             "seconds_after_esc": round(time.perf_counter() - state["esc_sent"], 1)}
-        log(f"cancelled: '{m.status}', keyed frames {sorted(frames)}")
-        bpy.app.timers.register(step_export, first_interval=0.5)
+        log(f"cancelled: '{m.status}', keyed frames {frames}")
+        bpy.app.timers.register(step_resume, first_interval=0.5)
         return None
     if time.perf_counter() - state["track_started"] > 240:
         raise TimeoutError("tracking did not reach 2 frames / did not stop within 240 s")
     return 0.2
+
+
+def keyed_frames():
+    """The scene frames the armature's action holds keys on (Blender 4.4+ keeps F-curves in slots)."""
+    arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    action = arm.animation_data.action if arm.animation_data else None
+    frames = set()
+    if action is not None:
+        curves = getattr(action, "fcurves", None)
+        if curves is None or len(curves) == 0:
+            from bpy_extras.anim_utils import action_get_channelbag_for_slot
+            curves = action_get_channelbag_for_slot(action, arm.animation_data.action_slot).fcurves
+        for fc in curves:
+            frames.update(int(k.co[0]) for k in fc.keyframe_points)
+    return sorted(frames)
+
+
+def resume_run(key, then):
+    """Track again with Resume ticked, as a user does after a cancel; record its status and keys, then `then`."""
+    @guarded
+    def watch_resumed():
+        m = props()
+        if m.is_tracking or m.preparing:
+            if time.perf_counter() - state[f"{key}_started"] > 240:
+                raise TimeoutError(f"the {key} run did not finish within 240 s")
+            return 0.2
+        report[key].update(status=m.status, frames_solved=m.frames_solved, keyed_frames=keyed_frames(),
+                           error=m.last_error)
+        log(f"{key}: '{m.status}', keyed frames {report[key]['keyed_frames']}")
+        bpy.app.timers.register(then, first_interval=0.5)
+        return None
+
+    report[key] = {"invoke": invoke_modal(bpy.ops.mocap.track, f"Track ({key})", f"{key}_started", watch_resumed)}
+
+
+@guarded
+def step_resume():
+    """Resume the cancelled take for two more frames: the keys of the earlier frames stay, two are added."""
+    m = props()
+    m.resume, m.frame_end = True, report["cancel"]["frames_solved"] + 1
+    resume_run("resume", step_resmooth)
+
+
+@guarded
+def step_resmooth():
+    """Resume the finished take with another Smoothing value: nothing left to solve, the take smoothed again."""
+    props().smoothing_hz = 3.0
+    resume_run("resmooth", step_export)
 
 
 @guarded

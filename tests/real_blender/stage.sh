@@ -180,7 +180,7 @@ diff <(cd "$out/command_result" && find . -type f | sort) <(cd "$out/module_resu
   > "$out/files.diff" || fail "--command and python -m wrote different files; see $out/files.diff"
 log "--command run wrote every result file: ${expected[*]} (the same set as python -m markerless_mocap track)"
 
-# 5. the UI under Xvfb: Import, Check, Calibrate Actor (modal), Track (modal), Esc, Export, with screenshots
+# 5. the UI under Xvfb: Import, Check, Calibrate Actor (modal), Track (modal), Esc, Resume twice, Export, with screenshots
 rm -f "$out/xvfb.display"
 chroot "$root" Xvfb -displayfd 1 -screen 0 1600x1200x24 -nolisten tcp > "$out/xvfb.display" 2> "$out/xvfb.log" &
 xvfb_pid=$!
@@ -188,7 +188,7 @@ trap 'kill "$xvfb_pid" 2>/dev/null || true; cleanup' EXIT
 for _ in $(seq 50); do [ -s "$out/xvfb.display" ] && break; sleep 0.2; done
 display="$(head -1 "$out/xvfb.display")"
 [ -n "$display" ] || fail "Xvfb did not start; see $out/xvfb.log"
-log "UI on Xvfb :$display: Import, Check, Calibrate, Track (modal), Esc, Export"
+log "UI on Xvfb :$display: Import, Check, Calibrate, Track (modal), Esc, Resume, Resume at 3 Hz, Export"
 t1=$(date +%s)
 timeout 420 chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURCES=/mnt/out/blender_user \
   PYTHONDONTWRITEBYTECODE=1 NUMBA_CACHE_DIR=/var/cache/mocap-numba MOCAP_CACHE_DIR=/var/cache/mocap-motion \
@@ -220,6 +220,14 @@ check(cancel.get("status", "").startswith("Cancelled after"), f"cancel status {c
 check(len(cancel.get("keyed_frames", [])) >= 2 and cancel.get("keyed_frames") == list(range(1, 1 + cancel.get("frames_solved", -1))),
       f"keys after the cancel: {cancel.get('keyed_frames')} for {cancel.get('frames_solved')} frames")
 check(cancel.get("frames_solved", 99) < 30, "Esc did not stop the run")
+k = cancel.get("frames_solved", -1)
+resumed, again = r.get("resume", {}), r.get("resmooth", {})
+check(resumed.get("invoke") == ["RUNNING_MODAL"] and resumed.get("status", "").startswith("Tracked 2 frames,")
+      and resumed.get("keyed_frames") == list(range(1, k + 3)),
+      f"Resume for two more frames: {resumed.get('status')!r}, keys {resumed.get('keyed_frames')} after {k} {resumed.get('error')!r}")
+check(again.get("status") == f"All {k + 2} frames were already tracked; the take smoothed again at 3 Hz"
+      and again.get("keyed_frames") == list(range(1, k + 3)),
+      f"Resume of the finished take with Smoothing 3 Hz: {again.get('status')!r}, keys {again.get('keyed_frames')} {again.get('error')!r}")
 lines = r.get("status_lines", [])
 # The status is sampled by the UI timer, so at preview speed (0.3 s/frame) a given frame's line may be skipped:
 # any frame after the first with its rate and time left will do.
@@ -233,6 +241,7 @@ check(len(r.get("screenshots", [])) == 7, f"screenshots: {r.get('screenshots')}"
 if problems:
     print("\n".join("[stage-ui] FAILED: " + p for p in problems)); sys.exit(1)
 print(f"[stage-ui] passed: calibrated in {cal.get('seconds')} s ({cal['summary'][0]}), {len(lines)} status lines, {r['timer_ticks_while_tracking']} UI timer ticks while tracking "
-      f"(longest gap {r['max_ui_gap_s']} s), cancelled with {len(cancel['keyed_frames'])} frames keyed, screenshots in ui/")
+      f"(longest gap {r['max_ui_gap_s']} s), cancelled with {len(cancel['keyed_frames'])} frames keyed, "
+      f"resumed to {len(resumed['keyed_frames'])}, smoothed again: '{again['status']}', screenshots in ui/")
 PY
 log "real-Blender stage PASSED in $(( $(date +%s) - t0 )) s (logs and screenshots: $out)"
