@@ -35,7 +35,7 @@ def main(argv=None):
     from markerless_mocap.core.likelihood import default_pose_at
     from markerless_mocap.core.optimizers import icp
     from markerless_mocap.core.pose_fitting import poses_from_joints
-    from markerless_mocap.core.results import load_joints
+    from markerless_mocap.core.results import ResultWriter, load_joints
     from markerless_mocap.core.tracking import TrackingSettings
     from markerless_mocap.operators.cmd_track import open_subject
     from markerless_mocap.operators.track_session import TrackSession
@@ -47,7 +47,8 @@ def main(argv=None):
     names, truth_frames, positions = load_joints(args.scene / "gt_joints.npz")
     last = int(np.searchsorted(truth_frames, max(frames)))
     truth_poses, _ = poses_from_joints(body, names, positions[:last + 1])
-    solved = np.load(args.result / ("poses_raw.npz" if (args.result / "poses_raw.npz").is_file() else "poses.npz"))
+    raw_poses = args.result / ResultWriter.RAW_FILES[1]  # the take as solved, when the result was smoothed
+    solved = np.load(raw_poses if raw_poses.is_file() else args.result / "poses.npz")
     joints = [c[0] for c in EVAL_JOINTS.values()]
     bones = [body.skeleton.index[b] for b in joints]
     columns = [names.index(b) for b in joints]
