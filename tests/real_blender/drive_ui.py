@@ -17,6 +17,7 @@ from pathlib import Path
 
 import bpy
 
+ADDON = "bl_ext.mocapdev.markerless_mocap"  # the module enable_addon.py installs the checkout as
 CAPTURE, OUT = (Path(p) for p in sys.argv[sys.argv.index("--") + 1:][:2])
 OUT.mkdir(parents=True, exist_ok=True)
 report = {"blender": bpy.app.version_string, "steps": [], "status_lines": [], "errors": [], "screenshots": []}
@@ -225,18 +226,12 @@ def step_watch():
 
 
 def keyed_frames():
-    """The scene frames the armature's action holds keys on (Blender 4.4+ keeps F-curves in slots)."""
+    """The scene frames the armature's action holds keys on, read as the add-on reads them (any Blender)."""
+    import importlib
+
+    compat = importlib.import_module(f"{ADDON}.addon.anim_compat")
     arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    action = arm.animation_data.action if arm.animation_data else None
-    frames = set()
-    if action is not None:
-        curves = getattr(action, "fcurves", None)
-        if curves is None or len(curves) == 0:
-            from bpy_extras.anim_utils import action_get_channelbag_for_slot
-            curves = action_get_channelbag_for_slot(action, arm.animation_data.action_slot).fcurves
-        for fc in curves:
-            frames.update(int(k.co[0]) for k in fc.keyframe_points)
-    return sorted(frames)
+    return [int(round(f)) for f in compat.keyed_frames(arm)]
 
 
 def resume_run(key, then):
