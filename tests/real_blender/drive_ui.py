@@ -269,7 +269,7 @@ def step_resmooth():
 
 @guarded
 def step_export():
-    screenshot("05_cancelled")
+    screenshot("05_resumed")  # after the cancel and both Resume runs
     with override():
         fbx = bpy.ops.mocap.export_fbx("EXEC_DEFAULT", filepath=str(OUT / "ui_export.fbx"))
         bvh = bpy.ops.mocap.export_bvh("EXEC_DEFAULT", filepath=str(OUT / "ui_export.bvh"))
