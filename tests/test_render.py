@@ -256,6 +256,33 @@ def test_fast_path_equals_reference_on_random_poses_and_views_of_different_sizes
     assert np.all(s_ref[-1, :, render.TEMPLATE] == 0)
 
 
+def test_fast_path_equals_reference_for_triangles_reaching_far_outside_the_image():
+    # The fast pixel loop steps edge functions in floats only while every vertex is within
+    # fast._FLOAT_EXACT_COORD (65536 px); a vertex beyond it (near the camera plane) takes the integer loop.
+    rng = np.random.default_rng(5)
+    cams = [look_at("a", [2.5, 0.3, 0.4], [0, 0, 0], 120, 64, 48)]
+    targets = random_blob_targets(cams, rng)
+    limit_px = fast._FLOAT_EXACT_COORD / reference.SUBPIXEL
+    # Two small triangles in front of the big one, crossing each other in depth, their corners on pixel
+    # centres and one along a row of them (the top-left rule decides those pixels), drawn by the same loop.
+    small = [[10.0, 10.0], [40.0, 10.0], [16.0, 40.0], [12.0, 38.0], [38.0, 14.0], [42.0, 36.0]]
+    uv, z = [], []
+    for far in (3e5, 0.9 * limit_px, 1.1 * limit_px):
+        uv.append([[-far, -0.7 * far], [far, 30.3], [20.7, 1.3 * far]] + small)
+        z.append([2.0, 2.5, 3.0, 1.0, 1.6, 1.3, 1.7, 1.0, 1.2])
+    uv, z = np.array(uv, float)[:, None], np.array(z)[:, None]
+    faces, labels = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]]), np.array([1, 2, 3], np.int16)
+    for cull in (0, 1, -1):
+        s_ref, h_ref = reference.statistics(uv, z, faces, labels, targets, True, 3, cull)
+        s_fast, h_fast = fast.statistics(uv, z, faces, labels, targets, True, 3, cull)
+        assert np.array_equal(s_ref[..., render.TEMPLATE], s_fast[..., render.TEMPLATE])
+        assert np.allclose(s_ref, s_fast, rtol=1e-12, atol=1e-9)
+        assert np.array_equal(h_ref, h_fast)
+    s_ref, h_ref = reference.statistics(uv, z, faces, labels, targets, True, 3, 0)
+    assert np.all(s_ref[:, 0, render.TEMPLATE] == 64 * 48)  # the big triangle covers the whole image
+    assert np.all(h_ref[:, 0, 1:, 0].sum(axis=-1) > 100)  # both small ones show over it
+
+
 def test_fast_path_matches_reference_on_the_body_at_the_energy_resolution(bpy_module):
     from rig_helpers import load_subject, subject_blend_path
 
