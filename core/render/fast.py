@@ -73,7 +73,8 @@ def _fill_float(ax, ay, bx, by, cx, cy, e0x, e0y, e1x, e1y, e2x, e2y, t0, t1, t2
 def _fill_int(ax, ay, bx, by, cx, cy, e0x, e0y, e1x, e1y, e2x, e2y, t0, t1, t2, iza, izb, izc, inv_area, lab,
               x0, x1, y0, y1, labels, zbuf):
     """_fill_float with integer edge functions, for triangles reaching far outside the image (a vertex
-    near the camera plane): their products can exceed what a float holds exactly."""
+    near the camera plane): their products can exceed what a float holds exactly. Kept as a second loop, not
+    a flag in one: one loop with both number types measured ~3 % slower on the search's batches."""
     s0, s1, s2 = e0y * SUBPIXEL, e1y * SUBPIXEL, e2y * SUBPIXEL
     sx0 = x0 * SUBPIXEL
     for y in range(y0, y1 + 1):
