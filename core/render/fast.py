@@ -38,7 +38,8 @@ def _chunks_one_at_a_time():
 
 # Below this many 1/SUBPIXEL units every edge-function value of a triangle (products of two coordinate
 # differences, each under 2^25) is an integer under 2^51, so float64 holds it exactly: the pixel loop then steps
-# floats, which gives the same inside tests and the same 1/z as integers converted per pixel, ~12 % sooner.
+# floats, which gives the same inside tests and the same 1/z as integers converted per pixel, ~9 % sooner
+# (the HD search batch: 31.6 -> 28.7 ms).
 _FLOAT_EXACT_COORD = 1 << 24
 
 
