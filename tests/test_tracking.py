@@ -74,7 +74,8 @@ def test_a_few_tracked_frames_stay_near_the_truth(walk, tmp_path):
 
 def test_the_preview_preset_tracks_a_few_frames_near_the_truth(walk):
     """The preview preset (50 x 4, the local fit at the search's resolution) from the true first pose. Measured
-    over frames 1-5, seed 0: mean 17.2 mm, worst 19.6 mm (the whole walk from the rough placement: README "Speed")."""
+    over frames 1-5, seed 0: mean 17.2 mm, worst 19.6 mm (the whole walk from the rough placement: README,
+    "Where it stands")."""
     import argparse
 
     from markerless_mocap.operators.cmd_track import add_tracking_options, settings_from_args
