@@ -21,12 +21,9 @@ from . import render
 from .proportions import Proportions, scaled_body, segment_lengths
 
 STEPS = (0.04, 0.02, 0.01, 0.005)  # log-factor steps of the pattern search, coarse to fine
-# Cost per squared log-factor departure from the landmark fit: only a tie-breaker where the masks are flat (a 3 %
-# departure costs 1e-6; on the actor scene 3 % of forearm moved the mean XOR / area by 3e-4). At 0.02 it was
-# as strong as the forearm's own signal 5-10 % from the landmarks and held it there: forearm / hip width on
-# the actor scene 0.962 / 0.981 of the true length, at 0.001 1.006 / 0.986; on walk, playground, dusk and busy
-# unchanged, lobby's forearm 1.006 -> 1.021 (tools/landmark_length_bias.py, seed 0 calibrations; README).
-PULL_TO_LANDMARKS = 0.001
+# Cost per squared log-factor departure from the landmark fit: a tie-breaker where the masks are flat. A 3 %
+# departure costs 2e-5; on the actor scene 3 % of spine moved the mean XOR / area by 0.01, of forearm by 3e-4.
+PULL_TO_LANDMARKS = 0.02
 MIN_MASK_PIXELS = 50   # a view whose mask has fewer pixels shows no person: left out for that frame
 MAX_ROUNDS = 12        # moves per step size
 # The segments the masks refine; the others keep the landmark fit's length. On walk and playground (true
