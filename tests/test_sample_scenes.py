@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2"]
 
 
 def scene_dir(name):
@@ -279,6 +279,22 @@ def test_actor_is_shorter_with_longer_forearms_than_its_subject():
     names, _, P = load_gt(d)
     fore = np.linalg.norm(P[:, names.index("LeftHand")] - P[:, names.index("LeftForeArm")], axis=1)
     np.testing.assert_allclose(fore, true["l_forearm"], atol=1e-4)  # the rendered bones are the actor's
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "walk" / "subject.blend").read_bytes()
+
+
+def test_actor2_is_built_otherwise_than_a_scaled_subject():
+    """The held-out actor: 5 % taller than walk's subject, and relative to that wider shoulders and hips, a
+    longer spine, shorter thighs and forearms; the rendered bones are that actor's."""
+    d = scene_dir("actor2")
+    info = json.loads((d / "scene_info.json").read_text())["actor"]
+    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
+    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    for seg, relative in (("spine", 1.04), ("thigh", 0.95), ("forearm", 0.94), ("upper_arm", 1.0), ("shin", 1.0)):
+        assert ratio[seg] == pytest.approx(1.05 * relative, rel=1e-6), seg
+    assert ratio["shoulder_width"] > 1.05 * 1.06 and ratio["hip_width"] > 1.05 * 1.04  # widths: joint to joint
+    names, _, P = load_gt(d)
+    thigh = np.linalg.norm(P[:, names.index("LeftLeg")] - P[:, names.index("LeftUpLeg")], axis=1)
+    np.testing.assert_allclose(thigh, true["l_thigh"], atol=1e-4)
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "walk" / "subject.blend").read_bytes()
 
 
