@@ -6,7 +6,7 @@ any reason keeps what it solved, and `--resume` continues from the checkpoint ex
     joints_raw.npz, poses_raw.npz  once a finished take is smoothed (core/smoothing.py): the poses as solved;
                  joints.npz and poses.npz then hold the smoothed take
     keypoints.npz  with learned evidence: frames, cameras, uv (F,C,33,2) image pixels, visibility (F,C,33)
-    report.json  settings, seed, per-frame energy and seconds, totals, software versions
+    report.json  settings, seed, per-frame energy, seconds and CPU seconds, totals, software versions
     checkpoint.pkl  the tracker's state after the last solved frame (optimiser particles, RNG, colour model)
 """
 import errno
@@ -47,6 +47,17 @@ def require_writable_folder(out):
         raise ResultWriteError(f"the result folder {out} cannot be written ({exc.strerror or exc}); choose another "
                                "result folder, or fix its permissions", exc.errno) from None
     return out
+
+
+def _cpu_seconds(estimate):
+    """The frame's process CPU seconds; None for frames solved before this was recorded (a resumed old run)."""
+    value = getattr(estimate, "cpu_seconds", None)
+    return None if value is None else float(value)
+
+
+def _mean_cpu_seconds(estimates):
+    values = [v for v in map(_cpu_seconds, estimates) if v is not None]
+    return float(np.mean(values)) if values else None
 
 
 def software_versions():
@@ -147,10 +158,11 @@ class ResultWriter:
             "settings": self.settings.to_dict(),
             "seed": self.settings.seed,
             **self.info,
-            "frames": [{"frame": e.frame, "energy": e.energy, "seconds": e.seconds, "evaluations": e.evaluations}
-                       for e in est],
+            "frames": [{"frame": e.frame, "energy": e.energy, "seconds": e.seconds, "evaluations": e.evaluations,
+                        "cpu_seconds": _cpu_seconds(e)} for e in est],
             "totals": {"frames": len(est), "seconds": float(sum(e.seconds for e in est)),
                        "seconds_per_frame": float(np.mean([e.seconds for e in est[1:]])) if len(est) > 1 else None,
+                       "cpu_seconds_per_frame": _mean_cpu_seconds(est[1:]),
                        "wall_seconds": time.time() - self.started},
             "software": {**software_versions(), **({"blender": self.blender_version} if self.blender_version else {})},
         }

@@ -178,6 +178,10 @@ class FrameEstimate:
     # visibility (0 where a view had none); None without learned evidence.
     landmarks: np.ndarray | None = None
     landmark_visibility: np.ndarray | None = None
+    # Process CPU time (every thread) while the frame was solved, the next frame's observation included: the
+    # ratio to `seconds` shows both cores at work, and a slow frame with the usual CPU time points at a
+    # machine shared with other work, not at the tracker (README, "Speed").
+    cpu_seconds: float | None = None
 
 
 class LazyBackgrounds(Mapping):
@@ -506,7 +510,7 @@ class Tracker:
             return self._initialise(frame, rough_pose, initial_pose)
 
     def _initialise(self, frame, rough_pose, initial_pose):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         body, s = self.body, self.settings
         rough = body.default_pose() if rough_pose is None else np.asarray(rough_pose, float)
         self.anchor = rotvec_to_matrix(rough[body.root_rotation_dofs])
@@ -552,7 +556,7 @@ class Tracker:
             self.energy.init_color_model(pose)
         energy = float(self.energy(pose[None])[0])
         self.optimizer.start(self.to_relative(pose))
-        return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
+        return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
 
     def _keypoint_start(self, start):
         """The first frame's pose from the triangulated landmarks (core/keypoint_fit.py), or None when too
@@ -581,7 +585,7 @@ class Tracker:
             return self._track(frame, next_frame)
 
     def _track(self, frame, next_frame):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         feats = self.load_frame(frame)
         upcoming = frame + 1 if next_frame is NEXT or next_frame is None else next_frame
         observe = self.settings.prefetch and next_frame is not None
@@ -603,7 +607,7 @@ class Tracker:
         lam = self.energy.weights.adaptation if lam is None else lam
         if self.uses_color and lam > 0:
             self.energy.adapt_color_model(pose, lam)
-        est = self._record(frame, pose, energy, time.perf_counter() - t0, evaluations)
+        est = self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
         self._reanchor(self.history[-1])
         return est
 
@@ -712,11 +716,12 @@ class Tracker:
             return list(silhouettes)
         return [s if keep else np.zeros_like(s) for s, keep in zip(silhouettes, in_play)]
 
-    def _record(self, frame, pose, energy, seconds, evaluations):
+    def _record(self, frame, pose, energy, seconds, evaluations, cpu_seconds=None):
         self.history.append(self.to_relative(pose))
         self.history = self.history[-3:]
         joints = self.body.joint_positions(pose[None])[0]
-        est = FrameEstimate(int(frame), pose, joints, float(energy), float(seconds), int(evaluations))
+        est = FrameEstimate(int(frame), pose, joints, float(energy), float(seconds), int(evaluations),
+                            cpu_seconds=None if cpu_seconds is None else float(cpu_seconds))
         if self.evidence is not None:
             est.landmarks = np.stack([ev.keypoints for ev in self.evidence])
             est.landmark_visibility = np.stack([ev.visibility if ev.found else np.zeros_like(ev.visibility)

@@ -2,6 +2,7 @@
 tracked frames stay near the truth, initialisation from the rough placement works, resume is exact,
 and every file of the result folder loads. Small budgets keep this to about a minute."""
 import json
+import os
 
 import numpy as np
 import pytest
@@ -178,6 +179,11 @@ def test_result_folder_files_all_load(tmp_path):
     assert poses["poses"].shape == (3, 30) and len(poses["dof_names"]) == 30
     report = json.loads((out / "report.json").read_text())
     assert report["seed"] == 3 and len(report["frames"]) == 3 and report["software"]["numpy"]
+    # CPU seconds per frame: every thread of the process, so more than none and at most the cores' share
+    for f in report["frames"]:
+        assert 0 < f["cpu_seconds"] <= f["seconds"] * (os.cpu_count() or 1) + 0.05, f
+    assert report["totals"]["cpu_seconds_per_frame"] == pytest.approx(
+        np.mean([f["cpu_seconds"] for f in report["frames"][1:]]))
     frames, err = joint_errors(out / "joints.npz", WALK / "gt_joints.npz")
     assert list(frames) == [0, 1, 2]
     for cam in load_capture(WALK).camera_names:
