@@ -133,6 +133,22 @@ SCENES = {
                                                            "spine": 1.05 * 1.04, "thigh": 1.05 * 0.95,
                                                            "forearm": 1.05 * 0.94}),
                    subject_from="walk"),
+    # issue 15, held out like actor2 (made in session 20, its baseline measured once): a third build, slight and
+    # long-limbed: 3 % shorter overall than the subject, with (relative to that) a 12 % longer neck, shoulders
+    # 7 % and hips 5 % narrower, a 4 % shorter spine, thighs 5 %, shins and upper arms 4 % longer; a forward
+    # jump of 01_01 (source frames 80-119), playground's subject.blend unchanged (turned 15.5 degrees from the
+    # actor's first facing), a camera layout of its own, plates.
+    "actor3": dict(bvh="01_01.bvh", start=80, n_frames=40, seed=3030, uncontrolled=False, calibration="toml",
+                   cameras=[
+                       (15, 3.5, 1.50, 515, (3.5, -5.5), 0.9),
+                       (100, 3.8, 1.80, 555, (-6.0, 2.5), -1.0),
+                       (190, 3.6, 1.35, 535, (5.0, 4.0), 0.4),
+                       (275, 3.9, 1.60, 570, (-2.0, -3.5), -1.4)],
+                   proportions=dict(overall=0.97, factors={"neck": 0.97 * 1.12, "shoulder_width": 0.97 * 0.93,
+                                                           "hip_width": 0.97 * 0.95, "spine": 0.97 * 0.96,
+                                                           "thigh": 0.97 * 1.05, "shin": 0.97 * 1.04,
+                                                           "upper_arm": 0.97 * 1.04}),
+                   subject_from="playground"),
 }
 MASK_FRAMES = 5
 

@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3"]
 
 
 def scene_dir(name):
@@ -296,6 +296,23 @@ def test_actor2_is_built_otherwise_than_a_scaled_subject():
     thigh = np.linalg.norm(P[:, names.index("LeftLeg")] - P[:, names.index("LeftUpLeg")], axis=1)
     np.testing.assert_allclose(thigh, true["l_thigh"], atol=1e-4)
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "walk" / "subject.blend").read_bytes()
+
+
+def test_actor3_is_slight_and_long_limbed():
+    """The second held-out actor: 3 % shorter than playground's subject, a longer neck, narrower shoulders and
+    hips, a shorter spine, longer thighs, shins and upper arms; the rendered bones are that actor's."""
+    d = scene_dir("actor3")
+    info = json.loads((d / "scene_info.json").read_text())["actor"]
+    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
+    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    for seg, relative in (("neck", 1.12), ("spine", 0.96), ("thigh", 1.05), ("shin", 1.04), ("upper_arm", 1.04),
+                          ("forearm", 1.0)):
+        assert ratio[seg] == pytest.approx(0.97 * relative, rel=1e-6), seg
+    assert ratio["shoulder_width"] < 0.97 * 0.95 and ratio["hip_width"] < 0.97 * 0.97  # widths: joint to joint
+    names, _, P = load_gt(d)
+    shin = np.linalg.norm(P[:, names.index("LeftFoot")] - P[:, names.index("LeftLeg")], axis=1)
+    np.testing.assert_allclose(shin, true["l_shin"], atol=1e-4)
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
