@@ -65,9 +65,24 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
             log("calibration: refining the proportions against the person masks")
             used = [[e.frame for e in est].index(f) for f in fit.frames]
             fit = refine_fit(fit, session.character, session.tracker, landmarks[used], visibility[used], log=log)
+            fit = _checked_against_rig(fit, session, landmarks[used], visibility[used],
+                                       np.array([e.pose for e in est])[used], log)
     finally:
         session.capture.close()
     return fit
+
+
+def _checked_against_rig(fit, session, landmarks, visibility, rig_poses, log):
+    """The fit, or the rig's own proportions where the calibrated body matches the person masks worse than the
+    rig as it is (core/calibration_check.py)."""
+    from ..core.calibration_check import compare_with_rig, keep_if_better
+
+    log("calibration: comparing the calibrated body with the rig as it is against the person masks")
+    comparison = compare_with_rig(fit, session.character, session.tracker, landmarks, visibility, rig_poses)
+    if not comparison.calibration_helps:
+        log(f"calibration: the calibrated body matches the person masks worse than the rig as it is (mismatch "
+            f"{comparison.calibrated:.3f} against {comparison.rig:.3f}): keeping the rig's proportions")
+    return keep_if_better(fit, comparison)
 
 
 def save_calibration(fit, out_dir, subject_name, capture_dir):
@@ -153,4 +168,12 @@ def describe(fit):
         if kept:
             lines.append(f"{' and '.join(s.replace('_', ' ') for s in kept)} from the landmarks: the masks do not "
                          "pin it down here")
+        check = refined.get("rig_check")
+        if check and check["kept"] == "rig":
+            fitted = check["fitted_lengths_m"]["height"]
+            lines.append(f"kept the rig's proportions: the fitted body (height {fitted:.3f} m) matched the person "
+                         f"masks worse than the rig ({check['calibrated']:.3f} against {check['rig']:.3f})")
+        elif check:
+            lines.append(f"the calibrated body matches the person masks better than the rig ({check['calibrated']:.3f}"
+                         f" against {check['rig']:.3f})")
     return lines

@@ -167,3 +167,33 @@ def test_a_length_the_masks_push_past_the_bound_keeps_the_landmark_fit(walk):
                              segments=SILHOUETTE_SEGMENTS)
     assert out.kept == ["forearm"] and out.proportions.factor("forearm") == 0.92
     assert out.proportions.factor("hip_width") == pytest.approx(truth.factor("hip_width"), rel=0.03)
+
+
+def test_the_masks_tell_a_wrong_calibration_from_the_rig(walk):
+    """The guard of core/calibration_check.py on synthetic masks, each body's poses refitted from the true ones
+    pushed off by a few degrees: masks of the rig itself rank the rig above a body 8 % larger; masks of an actor
+    8 % smaller rank that body above the rig; keep_if_better then keeps the rig in the first case only."""
+    from markerless_mocap.core.calibration_check import RigComparison, keep_if_better, mask_mismatch
+    from markerless_mocap.core.proportions_fit import ProportionsFit
+    from markerless_mocap.core.proxy import make_proxy
+
+    body, poses = walk
+    cameras = [c.scaled(0.5) for c in read_calibration(scene_dir("walk"))]
+    frames = np.arange(0, 60, 15)
+    start = poses[frames] + np.random.default_rng(3).normal(0.0, 0.03, poses[frames].shape)
+    proxy = make_proxy(body, 2000)
+    rig, bigger, smaller = Proportions({}, 1.0), Proportions.uniform(1.08), Proportions.uniform(0.92)
+    on_rig = mask_mismatch(body, proxy, cameras, _synthetic_masks(body, cameras, poses[frames]),
+                           [(rig, start), (bigger, start)], backend="fast")
+    assert on_rig[0] < on_rig[1], on_rig
+    on_actor = mask_mismatch(body, proxy, cameras, _synthetic_masks(scaled_body(body, smaller), cameras, poses[frames]),
+                             [(rig, start), (smaller, start)], backend="fast")
+    assert on_actor[1] < on_actor[0], on_actor
+    lengths = segment_lengths(scaled_body(body, bigger))
+    fit = ProportionsFit(bigger, lengths, segment_lengths(body), list(frames), 0.03, 0.02, poses[frames], {})
+    kept_rig = keep_if_better(fit, RigComparison(*on_rig))
+    assert kept_rig.proportions.overall == 1.0 and kept_rig.lengths == fit.subject_lengths
+    assert kept_rig.silhouettes["rig_check"]["kept"] == "rig"
+    assert kept_rig.silhouettes["rig_check"]["fitted_lengths_m"]["height"] == pytest.approx(lengths["height"])
+    kept_fit = keep_if_better(fit, RigComparison(on_rig[1], on_rig[0]))
+    assert kept_fit.proportions is bigger and kept_fit.silhouettes["rig_check"]["kept"] == "calibrated"
