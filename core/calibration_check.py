@@ -17,7 +17,7 @@ import dataclasses
 
 import numpy as np
 
-from .proportions import Proportions, scaled_body
+from .proportions import Proportions
 
 
 @dataclasses.dataclass
@@ -39,21 +39,14 @@ def rig_proportions(fit):
     return Proportions({k: 1.0 for k in fit.proportions.factors}, 1.0)
 
 
-def compare_with_rig(fit, subject, tracker, landmarks, visibility, rig_poses):
+def compare_with_rig(fit, subject, tracker, targets, rig_poses):
     """RigComparison for `fit` (a ProportionsFit, the masks' refinement done) of `subject`'s tracked frames.
-    landmarks (F,C,33,2) / visibility (F,C,33) and rig_poses (F,D): the frames of fit.frames, in that order,
-    rig_poses as tracked with the rig."""
-    from .keypoints import rig_keypoints
-    from .proportions_fit import targets_from_landmarks
-    from .proportions_silhouette import calibration_masks
-
-    masks, cameras = calibration_masks(tracker, fit.frames, fit.poses)
-    mask_scale = cameras[0].width / tracker.capture.cameras[0].width
-    rig = rig_keypoints(subject)
-    keypoints = [targets_from_landmarks(uv, vis, rig).scaled(mask_scale) for uv, vis in zip(landmarks, visibility)]
+    targets: the CalibrationTargets of fit.frames (core/proportions_silhouette.calibration_targets, the ones the
+    refinement used); rig_poses (F,D): those frames as tracked with the rig."""
     rig_cost, calibrated_cost = mask_mismatch(
-        subject, tracker.proxy, cameras, masks, [(rig_proportions(fit), rig_poses), (fit.proportions, fit.poses)],
-        keypoints, mask_scale / tracker.scale, tracker.settings.backend)
+        subject, tracker.proxy, targets.cameras, targets.masks,
+        [(rig_proportions(fit), rig_poses), (fit.proportions, fit.poses)], targets.keypoints,
+        targets.resolution(tracker), tracker.settings.backend)
     return RigComparison(rig_cost, calibrated_cost)
 
 
@@ -61,13 +54,12 @@ def mask_mismatch(subject, proxy, cameras, masks, candidates, keypoints=None, re
     """Per candidate (Proportions, start poses (F,D)): the mean XOR / model area of that body against the masks
     (per frame a list of one bool mask per camera, at the cameras' resolution), its poses first refitted to the
     masks (and keypoints) from the start poses. resolution: the masks' scale over the tracker's energy scale."""
-    from .proportions_silhouette import SilhouetteCost, _proxy_body, refit_poses
+    from .proportions_silhouette import SilhouetteCost, refit_poses, scaled_proxy
 
     costs = []
     for proportions, start in candidates:
-        body = scaled_body(_proxy_body(subject, proxy), proportions)
-        scaled_proxy = dataclasses.replace(proxy, vertices=body.vertices)
-        poses = refit_poses(body, scaled_proxy, cameras, masks, np.asarray(start, float), keypoints, resolution)
+        poses = refit_poses(*scaled_proxy(subject, proxy, proportions), cameras, masks, np.asarray(start, float),
+                            keypoints, resolution)
         costs.append(float(SilhouetteCost(subject, proxy, cameras, masks, poses, backend)([proportions])[0]))
     return costs
 

@@ -140,11 +140,6 @@ def refine_proportions(subject, proxy, cameras, masks, poses, proportions, backe
     segments: the segment names searched (None: all; the others keep their factor); rounds: pose refits by
     ICP (keypoints, resolution: see refit_poses), each followed by a search; 0 holds `poses`."""
     log = log or (lambda msg: None)
-
-    def scaled_proxy(props):
-        b = scaled_body(_proxy_body(subject, proxy), props)
-        return b, dataclasses.replace(proxy, vertices=b.vertices)
-
     keys = list(proportions.factors)
     z0 = np.log([proportions.factors[k] for k in keys])
     overall = proportions.overall
@@ -152,7 +147,8 @@ def refine_proportions(subject, proxy, cameras, masks, poses, proportions, backe
     z, evaluations = z0.copy(), 0
     for _ in range(max(1, rounds)):
         if rounds:  # the poses the masks want for the current body, then the body for those poses
-            poses = refit_poses(*scaled_proxy(_with(keys, z, overall)), cameras, masks, poses, keypoints, resolution)
+            poses = refit_poses(*scaled_proxy(subject, proxy, _with(keys, z, overall)), cameras, masks, poses,
+                                keypoints, resolution)
         cost = SilhouetteCost(subject, proxy, cameras, masks, poses, backend)
 
         def objective(zs):
@@ -202,21 +198,49 @@ def _pattern_search(objective, z, steps, log, free):
     return z
 
 
-def refine_fit(fit, subject, tracker, landmarks, visibility, segments=SILHOUETTE_SEGMENTS, rounds=ROUNDS,
-               log=None):
-    """The landmark fit `fit` (core/proportions_fit.fit_proportions) refined against the person masks the
-    tracker computes for its frames. landmarks (F,C,33,2) / visibility (F,C,33): the saved landmarks of
-    fit.frames, in that order. Returns a ProportionsFit (lengths recomputed, .silhouettes filled in)."""
+def scaled_proxy(subject, proxy, proportions):
+    """(body, proxy) of `subject` with the tracker's proxy skin, scaled to `proportions`."""
+    body = scaled_body(_proxy_body(subject, proxy), proportions)
+    return body, dataclasses.replace(proxy, vertices=body.vertices)
+
+
+@dataclasses.dataclass
+class CalibrationTargets:
+    """What the masks' refinement and the check against the rig compare a body with, per calibration frame."""
+    masks: list       # per frame one bool mask per camera, at the finest resolution the tracker computes
+    cameras: list     # the capture's cameras at that resolution
+    keypoints: list   # per frame KeypointTargets at that resolution
+    mask_scale: float  # that resolution over the capture's
+
+    def resolution(self, tracker):
+        """The masks' scale over the tracker's energy scale (refit_poses' `resolution`)."""
+        return self.mask_scale / tracker.scale
+
+
+def calibration_targets(tracker, subject, frames, poses, landmarks, visibility):
+    """CalibrationTargets of `frames`: the tracker's person masks with the learned model's crops around `poses`
+    (absolute, of `subject`), and the saved landmarks (F,C,33,2) / visibility (F,C,33) of those frames."""
     from .keypoints import rig_keypoints
     from .proportions_fit import targets_from_landmarks
 
-    masks, cameras = calibration_masks(tracker, fit.frames, fit.poses)
+    masks, cameras = calibration_masks(tracker, frames, poses)
     mask_scale = cameras[0].width / tracker.capture.cameras[0].width
     rig = rig_keypoints(subject)
     keypoints = [targets_from_landmarks(uv, vis, rig).scaled(mask_scale) for uv, vis in zip(landmarks, visibility)]
-    refinement = refine_proportions(subject, tracker.proxy, cameras, masks, fit.poses, fit.proportions,
-                                    backend=tracker.settings.backend, log=log, rounds=rounds, keypoints=keypoints,
-                                    resolution=mask_scale / tracker.scale, segments=segments)
+    return CalibrationTargets(masks, cameras, keypoints, mask_scale)
+
+
+def refine_fit(fit, subject, tracker, landmarks, visibility, segments=SILHOUETTE_SEGMENTS, rounds=ROUNDS,
+               log=None, targets=None):
+    """The landmark fit `fit` (core/proportions_fit.fit_proportions) refined against the person masks the
+    tracker computes for its frames. landmarks (F,C,33,2) / visibility (F,C,33): the saved landmarks of
+    fit.frames, in that order; targets: their calibration_targets around fit.poses when already made.
+    Returns a ProportionsFit (lengths recomputed, .silhouettes filled in)."""
+    t = targets or calibration_targets(tracker, subject, fit.frames, fit.poses, landmarks, visibility)
+    mask_scale = t.mask_scale
+    refinement = refine_proportions(subject, tracker.proxy, t.cameras, t.masks, fit.poses, fit.proportions,
+                                    backend=tracker.settings.backend, log=log, rounds=rounds, keypoints=t.keypoints,
+                                    resolution=t.resolution(tracker), segments=segments)
     return dataclasses.replace(
         fit, proportions=refinement.proportions,
         lengths=segment_lengths(scaled_body(subject, refinement.proportions)),

@@ -60,25 +60,28 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
         fit = fit_proportions(session.character, session.capture.cameras, landmarks, visibility,
                               np.array([e.pose for e in est]), frames=[e.frame for e in est], symmetric=symmetric)
         if silhouettes:
-            from ..core.proportions_silhouette import refine_fit
+            from ..core.proportions_silhouette import calibration_targets, refine_fit
 
             log("calibration: refining the proportions against the person masks")
             used = [[e.frame for e in est].index(f) for f in fit.frames]
-            fit = refine_fit(fit, session.character, session.tracker, landmarks[used], visibility[used], log=log)
-            fit = _checked_against_rig(fit, session, landmarks[used], visibility[used],
-                                       np.array([e.pose for e in est])[used], log)
+            # one pass of the learned evidence over the frames serves the refinement and the check after it
+            targets = calibration_targets(session.tracker, session.character, fit.frames, fit.poses,
+                                          landmarks[used], visibility[used])
+            fit = refine_fit(fit, session.character, session.tracker, landmarks[used], visibility[used], log=log,
+                             targets=targets)
+            fit = _checked_against_rig(fit, session, targets, np.array([e.pose for e in est])[used], log)
     finally:
         session.capture.close()
     return fit
 
 
-def _checked_against_rig(fit, session, landmarks, visibility, rig_poses, log):
+def _checked_against_rig(fit, session, targets, rig_poses, log):
     """The fit, or the rig's own proportions where the calibrated body matches the person masks worse than the
     rig as it is (core/calibration_check.py)."""
     from ..core.calibration_check import compare_with_rig, keep_if_better
 
     log("calibration: comparing the calibrated body with the rig as it is against the person masks")
-    comparison = compare_with_rig(fit, session.character, session.tracker, landmarks, visibility, rig_poses)
+    comparison = compare_with_rig(fit, session.character, session.tracker, targets, rig_poses)
     if not comparison.calibration_helps:
         log(f"calibration: the calibrated body matches the person masks worse than the rig as it is (mismatch "
             f"{comparison.calibrated:.3f} against {comparison.rig:.3f}): keeping the rig's proportions")
