@@ -149,6 +149,24 @@ SCENES = {
                                                            "thigh": 0.97 * 1.05, "shin": 0.97 * 1.04,
                                                            "upper_arm": 0.97 * 1.04}),
                    subject_from="playground"),
+    # issue 15, held out (made in session 21 before anything was measured on it, to judge the calibration's
+    # next change): a stocky build, long trunk on short legs, the opposite of actor3: 5 % shorter overall than the
+    # subject, with (relative to that) a 6 % longer spine, 8 % shorter neck, shoulders 6 % and hips 3 % wider,
+    # thighs 6 % and shins 4 % shorter, upper arms 3 % shorter and forearms 4 % longer; 131_01 before the walk
+    # (source frames 16-55: standing, shuffling, turning 40 degrees), playground's subject.blend unchanged, five
+    # cameras in a layout of its own, plates.
+    "actor4": dict(bvh="131_01.bvh", start=16, n_frames=40, seed=4040, uncontrolled=False, calibration="toml",
+                   cameras=[
+                       (50, 3.4, 1.45, 525, (-3.5, 4.5), 0.7),
+                       (120, 4.0, 1.90, 575, (4.0, -2.0), -1.2),
+                       (195, 3.6, 1.55, 510, (-6.5, -3.5), 1.1),
+                       (260, 3.8, 1.25, 560, (2.5, 6.0), -0.3),
+                       (330, 3.5, 1.70, 540, (5.5, 1.5), 0.9)],
+                   proportions=dict(overall=0.95, factors={"spine": 0.95 * 1.06, "neck": 0.95 * 0.92,
+                                                           "shoulder_width": 0.95 * 1.06, "hip_width": 0.95 * 1.03,
+                                                           "thigh": 0.95 * 0.94, "shin": 0.95 * 0.96,
+                                                           "upper_arm": 0.95 * 0.97, "forearm": 0.95 * 1.04}),
+                   subject_from="playground"),
 }
 MASK_FRAMES = 5
 

@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4"]
 
 
 def scene_dir(name):
@@ -312,6 +312,24 @@ def test_actor3_is_slight_and_long_limbed():
     names, _, P = load_gt(d)
     shin = np.linalg.norm(P[:, names.index("LeftFoot")] - P[:, names.index("LeftLeg")], axis=1)
     np.testing.assert_allclose(shin, true["l_shin"], atol=1e-4)
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
+
+
+def test_actor4_is_stocky_with_a_long_trunk_on_short_legs():
+    """The third held-out actor, the opposite of actor3: 5 % shorter than playground's subject, a longer spine
+    on shorter thighs and shins, a shorter neck, wider shoulders and hips, filmed by five cameras."""
+    d = scene_dir("actor4")
+    info = json.loads((d / "scene_info.json").read_text())["actor"]
+    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
+    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    for seg, relative in (("spine", 1.06), ("neck", 0.92), ("thigh", 0.94), ("shin", 0.96), ("upper_arm", 0.97),
+                          ("forearm", 1.04)):
+        assert ratio[seg] == pytest.approx(0.95 * relative, rel=1e-6), seg
+    assert ratio["shoulder_width"] > 0.95 * 1.04 and ratio["hip_width"] > 0.95 * 1.01  # widths: joint to joint
+    names, _, P = load_gt(d)
+    thigh = np.linalg.norm(P[:, names.index("RightLeg")] - P[:, names.index("RightUpLeg")], axis=1)
+    np.testing.assert_allclose(thigh, true["r_thigh"], atol=1e-4)
+    assert len(json.loads((d / "render_cameras.json").read_text())["cameras"]) == 5
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
 
