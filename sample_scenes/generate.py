@@ -167,6 +167,21 @@ SCENES = {
                                                            "thigh": 0.95 * 0.94, "shin": 0.95 * 0.96,
                                                            "upper_arm": 0.95 * 0.97, "forearm": 0.95 * 1.04}),
                    subject_from="playground"),
+    # issue 15, held out (made in session 21 after actor4's figures, before anything was measured on it, to judge
+    # the choice among bodies between the rig and the calibration): tall and long-armed, 7 % taller overall than
+    # the subject, with (relative to that) upper arms 5 % and forearms 6 % longer, hips 6 % narrower, a 2 % shorter
+    # spine, thighs 3 % and shins 2 % longer; 01_01 standing, then crouching for a jump (source frames 140-179),
+    # playground's subject.blend unchanged, four cameras further out than elsewhere (4.0-4.6 m), plates.
+    "actor5": dict(bvh="01_01.bvh", start=140, n_frames=40, seed=5050, uncontrolled=False, calibration="toml",
+                   cameras=[
+                       (-35, 4.3, 1.60, 545, (4.5, 3.0), -0.6),
+                       (55, 4.6, 1.45, 580, (-3.0, -4.5), 1.2),
+                       (145, 4.0, 1.95, 520, (6.0, 2.5), -0.9),
+                       (230, 4.4, 1.35, 560, (-5.5, -1.0), 0.5)],
+                   proportions=dict(overall=1.07, factors={"upper_arm": 1.07 * 1.05, "forearm": 1.07 * 1.06,
+                                                           "hip_width": 1.07 * 0.94, "spine": 1.07 * 0.98,
+                                                           "thigh": 1.07 * 1.03, "shin": 1.07 * 1.02}),
+                   subject_from="playground"),
 }
 MASK_FRAMES = 5
 

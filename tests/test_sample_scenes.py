@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4", "actor5"]
 
 
 def scene_dir(name):
@@ -332,6 +332,27 @@ def test_actor4_is_stocky_with_a_long_trunk_on_short_legs():
     assert len(json.loads((d / "render_cameras.json").read_text())["cameras"]) == 5
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
+
+
+def test_actor5_is_tall_and_long_armed():
+    """The fourth held-out actor: 7 % taller than playground's subject, longer arms and legs, narrower hips, a
+    slightly shorter spine, filmed from further out than the other scenes."""
+    d = scene_dir("actor5")
+    info = json.loads((d / "scene_info.json").read_text())["actor"]
+    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
+    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    for seg, relative in (("upper_arm", 1.05), ("forearm", 1.06), ("spine", 0.98), ("thigh", 1.03), ("shin", 1.02),
+                          ("neck", 1.0)):
+        assert ratio[seg] == pytest.approx(1.07 * relative, rel=1e-6), seg
+    assert ratio["hip_width"] < 1.07 * 0.96  # widths: joint to joint
+    names, _, P = load_gt(d)
+    fore = np.linalg.norm(P[:, names.index("RightHand")] - P[:, names.index("RightForeArm")], axis=1)
+    np.testing.assert_allclose(fore, true["r_forearm"], atol=1e-4)
+    hips = np.array(json.loads((d / "scene_info.json").read_text())["first_frame_hips"])
+    cameras = json.loads((d / "render_cameras.json").read_text())["cameras"]
+    distances = [np.hypot(*(np.array(c["matrix_world"])[:2, 3] - hips[:2])) for c in cameras]
+    assert len(cameras) == 4 and np.mean(distances) > 4.0
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
 def test_pose2sim_demo_loads_with_one_warning_per_padded_camera():
