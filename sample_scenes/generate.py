@@ -170,8 +170,8 @@ SCENES = {
     # issue 15, held out (made in session 21 after actor4's figures, before anything was measured on it, to judge
     # the choice among bodies between the rig and the calibration): tall and long-armed, 7 % taller overall than
     # the subject, with (relative to that) upper arms 5 % and forearms 6 % longer, hips 6 % narrower, a 2 % shorter
-    # spine, thighs 3 % and shins 2 % longer; 01_01 standing, then crouching for a jump (source frames 140-179),
-    # playground's subject.blend unchanged, four cameras further out than elsewhere (4.0-4.6 m), plates.
+    # spine, thighs 3 % and shins 2 % longer; a forward jump of 01_01 (source frames 140-179: the hips rise 35 cm
+    # and travel 0.9 m), playground's subject.blend unchanged, four cameras further out than elsewhere, plates.
     "actor5": dict(bvh="01_01.bvh", start=140, n_frames=40, seed=5050, uncontrolled=False, calibration="toml",
                    cameras=[
                        (-35, 4.3, 1.60, 545, (4.5, 3.0), -0.6),
@@ -181,6 +181,23 @@ SCENES = {
                    proportions=dict(overall=1.07, factors={"upper_arm": 1.07 * 1.05, "forearm": 1.07 * 1.06,
                                                            "hip_width": 1.07 * 0.94, "spine": 1.07 * 0.98,
                                                            "thigh": 1.07 * 1.03, "shin": 1.07 * 1.02}),
+                   subject_from="playground"),
+    # issue 15, held out (made in session 21 after actor5's figures, before anything was measured on it, to judge
+    # the halfway body): 2 % shorter overall than the subject, with (relative to that) hips 6 % wider, shoulders
+    # 5 % narrower, arms shorter (upper arm 5 %, forearm 4 %), a 3 % longer spine, 5 % longer neck, 3 % longer
+    # shins and 4 % longer feet; 01_01 (source frames 30-69: standing with the hands at chest height, a deep
+    # crouch, the take-off of a jump), playground's subject.blend unchanged, four cameras mounted high (2.1-2.4 m),
+    # plates.
+    "actor6": dict(bvh="01_01.bvh", start=30, n_frames=40, seed=6060, uncontrolled=False, calibration="toml",
+                   cameras=[
+                       (20, 3.6, 2.25, 530, (-4.0, 3.5), 0.8),
+                       (110, 3.9, 2.40, 560, (3.5, -5.0), -1.1),
+                       (200, 3.5, 2.10, 515, (5.0, 2.0), 0.4),
+                       (290, 3.8, 2.30, 550, (-2.5, -4.0), -0.7)],
+                   proportions=dict(overall=0.98, factors={"hip_width": 0.98 * 1.06, "shoulder_width": 0.98 * 0.95,
+                                                           "upper_arm": 0.98 * 0.95, "forearm": 0.98 * 0.96,
+                                                           "spine": 0.98 * 1.03, "neck": 0.98 * 1.05,
+                                                           "shin": 0.98 * 1.03, "foot": 0.98 * 1.04}),
                    subject_from="playground"),
 }
 MASK_FRAMES = 5

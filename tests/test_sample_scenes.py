@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4", "actor5"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4", "actor5", "actor6"]
 
 
 def scene_dir(name):
@@ -118,7 +118,7 @@ def test_calibration_reproduces_the_render_cameras(name):
         np.testing.assert_allclose(rendered.t, cal.t, atol=1e-6)
         assert cal.size == (r["resolution_x"], r["resolution_y"])
         assert np.all(cal.dist == 0)
-        assert 1.2 <= cal.center[2] <= 2.0
+        assert 1.2 <= cal.center[2] <= 2.5  # tripods; actor6 mounted high (2.1-2.4 m)
 
 
 @pytest.mark.bpy
@@ -336,7 +336,7 @@ def test_actor4_is_stocky_with_a_long_trunk_on_short_legs():
 
 def test_actor5_is_tall_and_long_armed():
     """The fourth held-out actor: 7 % taller than playground's subject, longer arms and legs, narrower hips, a
-    slightly shorter spine, filmed from further out than the other scenes."""
+    slightly shorter spine, filmed from further out than the other scenes, jumping forwards."""
     d = scene_dir("actor5")
     info = json.loads((d / "scene_info.json").read_text())["actor"]
     true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
@@ -352,6 +352,25 @@ def test_actor5_is_tall_and_long_armed():
     cameras = json.loads((d / "render_cameras.json").read_text())["cameras"]
     distances = [np.hypot(*(np.array(c["matrix_world"])[:2, 3] - hips[:2])) for c in cameras]
     assert len(cameras) == 4 and np.mean(distances) > 4.0
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
+
+
+def test_actor6_has_the_subjects_height_and_other_proportions():
+    """The fifth held-out actor: the subject's height within 1 %, but wider hips, narrower shoulders, shorter
+    arms, a longer neck and shins; filmed by cameras mounted high, crouching deeply."""
+    d = scene_dir("actor6")
+    info = json.loads((d / "scene_info.json").read_text())["actor"]
+    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
+    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    assert ratio["height"] == pytest.approx(1.0, abs=0.01)
+    for seg, relative in (("upper_arm", 0.95), ("forearm", 0.96), ("spine", 1.03), ("neck", 1.05), ("shin", 1.03),
+                          ("foot", 1.04), ("thigh", 1.0)):
+        assert ratio[seg] == pytest.approx(0.98 * relative, rel=1e-6), seg
+    assert ratio["hip_width"] > 0.98 * 1.04 and ratio["shoulder_width"] < 0.98 * 0.97  # widths: joint to joint
+    names, _, P = load_gt(d)
+    assert P[:, names.index("Hips"), 2].max() - P[:, names.index("Hips"), 2].min() > 0.15  # the crouch
+    cameras = json.loads((d / "render_cameras.json").read_text())["cameras"]
+    assert len(cameras) == 4 and min(np.array(c["matrix_world"])[2][3] for c in cameras) > 2.0
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
