@@ -69,23 +69,29 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
                                           landmarks[used], visibility[used])
             fit = refine_fit(fit, session.character, session.tracker, landmarks[used], visibility[used], log=log,
                              targets=targets)
-            fit = _checked_against_rig(fit, session, targets, np.array([e.pose for e in est])[used], log)
+            fit = _chosen_body(fit, session, targets, np.array([e.pose for e in est])[used], log)
     finally:
         session.capture.close()
     return fit
 
 
-def _checked_against_rig(fit, session, targets, rig_poses, log):
-    """The fit, or the rig's own proportions where the calibrated body matches the person masks worse than the
-    rig as it is (core/calibration_check.py)."""
-    from ..core.calibration_check import compare_with_rig, keep_if_better
+def _chosen_body(fit, session, targets, rig_poses, log):
+    """The fit's segments taken halfway, or the rig's own proportions where they match the person masks better
+    (core/calibration_check.py)."""
+    from ..core.calibration_check import compare_bodies, keep_chosen
 
-    log("calibration: comparing the calibrated body with the rig as it is against the person masks")
-    comparison = compare_with_rig(fit, session.character, session.tracker, targets, rig_poses)
-    if not comparison.calibration_helps:
-        log(f"calibration: the calibrated body matches the person masks worse than the rig as it is (mismatch "
-            f"{comparison.calibrated:.3f} against {comparison.rig:.3f}): keeping the rig's proportions")
-    return keep_if_better(fit, comparison)
+    log("calibration: comparing the rig with the calibrated body (segments halfway) against the person masks")
+    comparison = compare_bodies(fit, session.character, session.tracker, targets, rig_poses)
+    log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)})")
+    return keep_chosen(fit, session.character, comparison)
+
+
+_CHOICE = {"rig": "kept the rig's proportions",
+           "halfway": "took each segment halfway between the fit and the rig scaled to the fitted height"}
+
+
+def _mismatches(mismatch):
+    return "mask mismatch " + ", ".join(f"{name} {value:.3f}" for name, value in mismatch.items())
 
 
 def save_calibration(fit, out_dir, subject_name, capture_dir):
@@ -171,12 +177,9 @@ def describe(fit):
         if kept:
             lines.append(f"{' and '.join(s.replace('_', ' ') for s in kept)} from the landmarks: the masks do not "
                          "pin it down here")
-        check = refined.get("rig_check")
-        if check and check["kept"] == "rig":
-            fitted = check["fitted_lengths_m"]["height"]
-            lines.append(f"kept the rig's proportions: the fitted body (height {fitted:.3f} m) matched the person "
-                         f"masks worse than the rig ({check['calibrated']:.3f} against {check['rig']:.3f})")
-        elif check:
-            lines.append(f"the calibrated body matches the person masks better than the rig ({check['calibrated']:.3f}"
-                         f" against {check['rig']:.3f})")
+        check = refined.get("body_check")
+        if check:
+            fitted = check.get("fitted_lengths_m", L)["height"]
+            lines.append(f"{_CHOICE[check['chosen']]}: it matches the person masks best "
+                         f"({_mismatches(check['mismatch'])}; fitted height {fitted:.3f} m)")
     return lines

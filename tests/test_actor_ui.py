@@ -118,8 +118,8 @@ def test_cli_reuses_a_saved_calibration_and_refuses_a_bad_one(subject_with_actor
 
 def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     """`track --calibrate` end to end (a tiny search budget, 3 calibration frames, 2 tracked): OUT/actor.json is
-    written (with the mask refinement's record), joints.npz holds the calibrated actor's bones (its forearm length), and the BVH the rig's own
-    bones (the character is keyed, not stretched)."""
+    written (with the mask refinement's record and the body chosen), joints.npz holds the calibrated actor's
+    bones (its forearm length), and the BVH the rig's own bones (the character is keyed, not stretched)."""
     import json
 
     from markerless_mocap.core.actor_file import load_actor
@@ -139,7 +139,13 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     refined = actor["silhouettes"]
     assert refined["segments"] == ["forearm", "hip_width"]
     assert refined["mask_mismatch"]["refined"] <= refined["mask_mismatch"]["landmark_fit"]
-    assert {k for k, v in actor["factors"].items() if v != refined["landmark_factors"][k]} <= {"forearm", "hip_width"}
+    # ... then the masks chose between the rig and the fit's segments taken halfway
+    check = refined["body_check"]
+    assert list(check["mismatch"]) == ["rig", "halfway"]
+    assert check["chosen"] == min(check["mismatch"], key=check["mismatch"].get)
+    fitted = check["fitted_factors"]
+    assert {k for k, v in fitted.items() if v != refined["landmark_factors"][k]} <= {"forearm", "hip_width"}
+    assert f"it matches the person masks best (mask mismatch rig {check['mismatch']['rig']:.3f}" in run.stderr
     assert json.loads((out / "report.json").read_text())["actor"]["lengths_m"] == actor["lengths_m"]
     with np.load(out / "joints.npz") as z:
         names, P = [str(n) for n in z["names"]], z["positions"]

@@ -169,11 +169,12 @@ def test_a_length_the_masks_push_past_the_bound_keeps_the_landmark_fit(walk):
     assert out.proportions.factor("hip_width") == pytest.approx(truth.factor("hip_width"), rel=0.03)
 
 
-def test_the_masks_tell_a_wrong_calibration_from_the_rig(walk):
-    """The guard of core/calibration_check.py on synthetic masks, each body's poses refitted from the true ones
+def test_the_masks_choose_between_the_rig_and_the_halfway_body(walk):
+    """The choice of core/calibration_check.py on synthetic masks, each body's poses refitted from the true ones
     pushed off by a few degrees: masks of the rig itself rank the rig above a body 8 % larger; masks of an actor
-    8 % smaller rank that body above the rig; keep_if_better then keeps the rig in the first case only."""
-    from markerless_mocap.core.calibration_check import RigComparison, keep_if_better, mask_mismatch
+    8 % smaller rank that body above the rig. The halfway body takes each segment's deviation from the uniform
+    scale to the fitted height halfway; keep_chosen gives the chosen body and keeps the fit on record."""
+    from markerless_mocap.core.calibration_check import BodyComparison, candidate_bodies, keep_chosen, mask_mismatch
     from markerless_mocap.core.proportions_fit import ProportionsFit
     from markerless_mocap.core.proxy import make_proxy
 
@@ -189,11 +190,22 @@ def test_the_masks_tell_a_wrong_calibration_from_the_rig(walk):
     on_actor = mask_mismatch(body, proxy, cameras, _synthetic_masks(scaled_body(body, smaller), cameras, poses[frames]),
                              [(rig, start), (smaller, start)], backend="fast")
     assert on_actor[1] < on_actor[0], on_actor
-    lengths = segment_lengths(scaled_body(body, bigger))
-    fit = ProportionsFit(bigger, lengths, segment_lengths(body), list(frames), 0.03, 0.02, poses[frames], {})
-    kept_rig = keep_if_better(fit, RigComparison(*on_rig))
+
+    fitted = Proportions({"spine": 1.10, "thigh": 0.90, "forearm": 1.0}, 1.0)
+    lengths = segment_lengths(scaled_body(body, fitted))
+    fit = ProportionsFit(fitted, lengths, segment_lengths(body), list(frames), 0.03, 0.02, poses[frames], {})
+    bodies = candidate_bodies(fit)
+    scale = lengths["height"] / segment_lengths(body)["height"]
+    assert list(bodies) == ["rig", "halfway"] and set(bodies["rig"].factors.values()) == {1.0}
+    assert bodies["halfway"].factors["spine"] == pytest.approx(np.sqrt(1.10 * scale))
+    assert bodies["halfway"].factors["thigh"] == pytest.approx(np.sqrt(0.90 * scale))
+    kept_rig = keep_chosen(fit, body, BodyComparison({"rig": on_rig[0], "halfway": on_rig[1]}))
     assert kept_rig.proportions.overall == 1.0 and kept_rig.lengths == fit.subject_lengths
-    assert kept_rig.silhouettes["rig_check"]["kept"] == "rig"
-    assert kept_rig.silhouettes["rig_check"]["fitted_lengths_m"]["height"] == pytest.approx(lengths["height"])
-    kept_fit = keep_if_better(fit, RigComparison(on_rig[1], on_rig[0]))
-    assert kept_fit.proportions is bigger and kept_fit.silhouettes["rig_check"]["kept"] == "calibrated"
+    check = kept_rig.silhouettes["body_check"]
+    assert check["chosen"] == "rig" and check["fitted_lengths_m"]["height"] == pytest.approx(lengths["height"])
+    halfway = keep_chosen(fit, body, BodyComparison({"rig": on_actor[0], "halfway": on_actor[1]}))
+    assert halfway.silhouettes["body_check"]["chosen"] == "halfway"
+    assert halfway.silhouettes["body_check"]["fitted_factors"] == fitted.factors
+    assert halfway.lengths["spine"] == pytest.approx(segment_lengths(scaled_body(body, bodies["halfway"]))["spine"])
+    assert lengths["spine"] > halfway.lengths["spine"] > segment_lengths(body)["spine"] * scale
+    assert halfway.lengths["height"] == pytest.approx(lengths["height"], rel=0.01)
