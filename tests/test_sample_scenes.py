@@ -282,13 +282,18 @@ def test_actor_is_shorter_with_longer_forearms_than_its_subject():
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "walk" / "subject.blend").read_bytes()
 
 
+def _actor_lengths(d):
+    """The rendered actor's true segment lengths (m) and their ratios to the tracker's subject's."""
+    info = json.loads((d / "scene_info.json").read_text())["actor"]
+    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
+    return true, {seg: true[seg] / subject[seg] for seg in true}
+
+
 def test_actor2_is_built_otherwise_than_a_scaled_subject():
     """The held-out actor: 5 % taller than walk's subject, and relative to that wider shoulders and hips, a
     longer spine, shorter thighs and forearms; the rendered bones are that actor's."""
     d = scene_dir("actor2")
-    info = json.loads((d / "scene_info.json").read_text())["actor"]
-    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
-    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    true, ratio = _actor_lengths(d)
     for seg, relative in (("spine", 1.04), ("thigh", 0.95), ("forearm", 0.94), ("upper_arm", 1.0), ("shin", 1.0)):
         assert ratio[seg] == pytest.approx(1.05 * relative, rel=1e-6), seg
     assert ratio["shoulder_width"] > 1.05 * 1.06 and ratio["hip_width"] > 1.05 * 1.04  # widths: joint to joint
@@ -302,9 +307,7 @@ def test_actor3_is_slight_and_long_limbed():
     """The second held-out actor: 3 % shorter than playground's subject, a longer neck, narrower shoulders and
     hips, a shorter spine, longer thighs, shins and upper arms; the rendered bones are that actor's."""
     d = scene_dir("actor3")
-    info = json.loads((d / "scene_info.json").read_text())["actor"]
-    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
-    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    true, ratio = _actor_lengths(d)
     for seg, relative in (("neck", 1.12), ("spine", 0.96), ("thigh", 1.05), ("shin", 1.04), ("upper_arm", 1.04),
                           ("forearm", 1.0)):
         assert ratio[seg] == pytest.approx(0.97 * relative, rel=1e-6), seg
@@ -319,9 +322,7 @@ def test_actor4_is_stocky_with_a_long_trunk_on_short_legs():
     """The third held-out actor, the opposite of actor3: 5 % shorter than playground's subject, a longer spine
     on shorter thighs and shins, a shorter neck, wider shoulders and hips, filmed by five cameras."""
     d = scene_dir("actor4")
-    info = json.loads((d / "scene_info.json").read_text())["actor"]
-    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
-    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    true, ratio = _actor_lengths(d)
     for seg, relative in (("spine", 1.06), ("neck", 0.92), ("thigh", 0.94), ("shin", 0.96), ("upper_arm", 0.97),
                           ("forearm", 1.04)):
         assert ratio[seg] == pytest.approx(0.95 * relative, rel=1e-6), seg
@@ -338,9 +339,7 @@ def test_actor5_is_tall_and_long_armed():
     """The fourth held-out actor: 7 % taller than playground's subject, longer arms and legs, narrower hips, a
     slightly shorter spine, filmed from further out than the other scenes, jumping forwards."""
     d = scene_dir("actor5")
-    info = json.loads((d / "scene_info.json").read_text())["actor"]
-    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
-    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    true, ratio = _actor_lengths(d)
     for seg, relative in (("upper_arm", 1.05), ("forearm", 1.06), ("spine", 0.98), ("thigh", 1.03), ("shin", 1.02),
                           ("neck", 1.0)):
         assert ratio[seg] == pytest.approx(1.07 * relative, rel=1e-6), seg
@@ -359,9 +358,7 @@ def test_actor6_has_the_subjects_height_and_other_proportions():
     """The fifth held-out actor: the subject's height within 1 %, but wider hips, narrower shoulders, shorter
     arms, a longer neck and shins; filmed by cameras mounted high, crouching deeply."""
     d = scene_dir("actor6")
-    info = json.loads((d / "scene_info.json").read_text())["actor"]
-    true, subject = info["true_segment_lengths_m"], info["subject_segment_lengths_m"]
-    ratio = {seg: true[seg] / subject[seg] for seg in true}
+    true, ratio = _actor_lengths(d)
     assert ratio["height"] == pytest.approx(1.0, abs=0.01)
     for seg, relative in (("upper_arm", 0.95), ("forearm", 0.96), ("spine", 1.03), ("neck", 1.05), ("shin", 1.03),
                           ("foot", 1.04), ("thigh", 1.0)):
