@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4", "actor5", "actor6"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4", "actor5", "actor6", "actor7"]
 
 
 def scene_dir(name):
@@ -368,6 +368,22 @@ def test_actor6_has_the_subjects_height_and_other_proportions():
     assert P[:, names.index("Hips"), 2].max() - P[:, names.index("Hips"), 2].min() > 0.15  # the crouch
     cameras = json.loads((d / "render_cameras.json").read_text())["cameras"]
     assert len(cameras) == 4 and min(np.array(c["matrix_world"])[2][3] for c in cameras) > 2.0
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
+
+
+def test_actor7_has_a_short_trunk_on_long_legs():
+    """The sixth held-out actor: 2 % taller than playground's subject, a shorter spine and neck on longer thighs
+    and shins, wider shoulders; standing."""
+    d = scene_dir("actor7")
+    true, ratio = _actor_lengths(d)
+    for seg, relative in (("spine", 0.95), ("neck", 0.95), ("thigh", 1.05), ("shin", 1.03), ("forearm", 1.0)):
+        assert ratio[seg] == pytest.approx(1.02 * relative, rel=1e-6), seg
+    assert ratio["shoulder_width"] > 1.02 * 1.02
+    names, _, P = load_gt(d)
+    spine = np.linalg.norm(P[:, names.index("Neck")] - P[:, names.index("Hips")], axis=1)
+    thigh = np.linalg.norm(P[:, names.index("LeftLeg")] - P[:, names.index("LeftUpLeg")], axis=1)
+    np.testing.assert_allclose(thigh, true["l_thigh"], atol=1e-4)
+    assert np.all(spine < true["spine"] + 1e-3)  # the trunk's bones bend, never lengthen
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
