@@ -1,4 +1,5 @@
-"""Choose the actor's body: the user's rig as it is, or the calibration with its segments taken halfway.
+"""Choose the actor's body: the user's rig as it is, or the calibration with its segments taken halfway and
+its spine / thigh split read from the masks.
 
 The landmark fit and the masks' refinement get the actor's height right to a per cent or two, but how that height
 splits into segments only roughly: BlazePose's points carry the proportions it was trained on, so where the hip
@@ -9,7 +10,9 @@ was worse than with the rig (18.4 -> 21.0 mm). Each segment's deviation from a u
 is then partly the actor's and partly an error of about the same size, so the body tracked with takes half of it
 (the geometric mean of the calibration and the uniformly scaled rig, segment by segment; head, hands and girth
 alike). Tracking error (mm, seed 0) with the uniform scale / halfway / the full calibration: actor2 32.5 / 29.4 /
-31.4, actor3 16.4 / 18.2 / 21.0, actor4 18.3 / 18.0 / 18.9, actor5 18.6 / 18.3 / 19.3.
+31.4, actor3 16.4 / 18.2 / 21.0, actor4 18.3 / 18.0 / 18.9, actor5 18.6 / 18.3 / 19.3. The spine and thighs,
+whose split the landmarks do not measure, start from that uniform scale instead, and the masks set the split
+(core/trunk_leg_split.py; actor3 then tracks at 12.9 mm, its true proportions at 12.1).
 
 The person masks of the calibration frames then decide between the rig as it is and that body, each getting its
 own poses: every frame refitted to the masks (and landmarks) by the tracker's local fit from the poses tracked
@@ -33,13 +36,15 @@ BODIES = ("rig", "halfway")  # in this order, the first of equal mismatches wins
 @dataclasses.dataclass
 class BodyComparison:
     mismatch: dict  # body name -> mean XOR / model area over the calibration frames' views
+    bodies: dict = dataclasses.field(default_factory=dict)  # body name -> Proportions
+    split: dict = dataclasses.field(default_factory=dict)   # the trunk/leg split's search (core/trunk_leg_split.py)
 
     @property
     def chosen(self):
         return min(self.mismatch, key=lambda name: (self.mismatch[name], BODIES.index(name)))
 
     def as_dict(self):
-        return {"mismatch": dict(self.mismatch), "chosen": self.chosen}
+        return {"mismatch": dict(self.mismatch), "chosen": self.chosen, **({"split": self.split} if self.split else {})}
 
 
 def halfway_body(fit):
@@ -56,14 +61,26 @@ def candidate_bodies(fit):
 
 
 def compare_bodies(fit, subject, tracker, targets, rig_poses):
-    """BodyComparison of candidate_bodies(fit) for `subject`'s tracked frames. targets: the CalibrationTargets
-    of fit.frames (core/proportions_silhouette.calibration_targets, the ones the refinement used); rig_poses
-    (F,D): those frames as tracked with the rig, every body's start (so no body starts closer to the masks)."""
+    """BodyComparison of the rig and the halfway body, its trunk/leg split set by the masks
+    (core/trunk_leg_split.py), for `subject`'s tracked frames. targets: the CalibrationTargets of fit.frames
+    (core/proportions_silhouette.calibration_targets, the ones the refinement used); rig_poses (F,D): those frames
+    as tracked with the rig, every body's start (so no body starts closer to the masks)."""
+    from .trunk_leg_split import split_by_masks, traded
+
+    def mismatch(bodies):
+        return mask_mismatch(subject, tracker.proxy, targets.cameras, targets.masks,
+                             [(p, rig_poses) for p in bodies], targets.keypoints, targets.resolution(tracker),
+                             tracker.settings.backend)
+
     bodies = candidate_bodies(fit)
-    costs = mask_mismatch(subject, tracker.proxy, targets.cameras, targets.masks,
-                          [(p, rig_poses) for p in bodies.values()], targets.keypoints,
-                          targets.resolution(tracker), tracker.settings.backend)
-    return BodyComparison(dict(zip(bodies, costs)))
+    scale = fit.lengths["height"] / fit.subject_lengths["height"]
+    halfway = bodies["halfway"]
+    level = Proportions({**halfway.factors, **{k: scale for k in halfway.factors if k == "spine" or
+                                                k.endswith("thigh")}}, halfway.overall)  # the usual split
+    t, grid = split_by_masks(level, fit.subject_lengths, mismatch)
+    bodies["halfway"] = traded(level, fit.subject_lengths, t)
+    costs = mismatch(bodies.values())
+    return BodyComparison(dict(zip(bodies, costs)), bodies, {"spine_log_change": t, "grid": grid})
 
 
 def mask_mismatch(subject, proxy, cameras, masks, candidates, keypoints=None, resolution=1.0, backend="auto"):
@@ -87,6 +104,6 @@ def keep_chosen(fit, subject, comparison):
     record = {**(fit.silhouettes or {}), "body_check": {
         **comparison.as_dict(), "fitted_factors": dict(fit.proportions.factors),
         "fitted_overall": fit.proportions.overall, "fitted_lengths_m": dict(fit.lengths)}}
-    proportions = candidate_bodies(fit)[chosen]
+    proportions = (comparison.bodies or candidate_bodies(fit))[chosen]
     lengths = dict(fit.subject_lengths) if chosen == "rig" else segment_lengths(scaled_body(subject, proportions))
     return dataclasses.replace(fit, proportions=proportions, lengths=lengths, silhouettes=record)

@@ -80,7 +80,8 @@ def _chosen_body(fit, session, targets, rig_poses, log):
     (core/calibration_check.py)."""
     from ..core.calibration_check import compare_bodies, keep_chosen
 
-    log("calibration: comparing the rig with the calibrated body (segments halfway) against the person masks")
+    log("calibration: the spine/thigh split and the choice between the rig and the calibrated body (segments "
+        "halfway), against the person masks")
     comparison = compare_bodies(fit, session.character, session.tracker, targets, rig_poses)
     log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)})")
     return keep_chosen(fit, session.character, comparison)
@@ -182,4 +183,14 @@ def describe(fit):
             fitted = check.get("fitted_lengths_m", L)["height"]
             lines.append(f"{_CHOICE[check['chosen']]}: it matches the person masks best "
                          f"({_mismatches(check['mismatch'])}; fitted height {fitted:.3f} m)")
+            split = check.get("split")
+            if check["chosen"] == "halfway" and split:
+                grid = {float(t): cost for t, cost in split["grid"].items()}  # keys are strings once saved
+                if min(grid, key=grid.get) in (min(grid), max(grid)):
+                    lines.append("spine and thigh split as the uniform scale has them: the person masks do not pin "
+                                 "the split down here")
+                else:
+                    change = np.exp(split["spine_log_change"]) - 1.0
+                    lines.append(f"spine and thigh split by the person masks: the spine {100 * change:+.1f} % "
+                                 "against the uniform scale, the thighs making up the height")
     return lines
