@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", "actor2", "actor3", "actor4", "actor5", "actor6", "actor7"]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 8))]
 
 
 def scene_dir(name):
