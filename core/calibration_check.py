@@ -47,10 +47,15 @@ class BodyComparison:
         return {"mismatch": dict(self.mismatch), "chosen": self.chosen, **({"split": self.split} if self.split else {})}
 
 
+def fitted_scale(fit):
+    """The uniform scale of the rig to the height of `fit` (a ProportionsFit)."""
+    return fit.lengths["height"] / fit.subject_lengths["height"]
+
+
 def halfway_body(fit):
     """Proportions halfway (geometric mean, segment by segment) between `fit` (a ProportionsFit) and the rig
     scaled uniformly to the fitted height."""
-    scale = fit.lengths["height"] / fit.subject_lengths["height"]
+    scale = fitted_scale(fit)
     return Proportions({k: float(np.sqrt(f * scale)) for k, f in fit.proportions.factors.items()},
                        float(np.sqrt(fit.proportions.overall * scale)))
 
@@ -73,9 +78,8 @@ def compare_bodies(fit, subject, tracker, targets, rig_poses):
                              tracker.settings.backend)
 
     bodies = candidate_bodies(fit)
-    scale = fit.lengths["height"] / fit.subject_lengths["height"]
     halfway = bodies["halfway"]
-    level = Proportions({**halfway.factors, **{k: scale for k in halfway.factors if k == "spine" or
+    level = Proportions({**halfway.factors, **{k: fitted_scale(fit) for k in halfway.factors if k == "spine" or
                                                 k.endswith("thigh")}}, halfway.overall)  # the usual split
     t, grid = split_by_masks(level, fit.subject_lengths, mismatch)
     bodies["halfway"] = traded(level, fit.subject_lengths, t)

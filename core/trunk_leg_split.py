@@ -39,12 +39,19 @@ def split_by_masks(start, subject_lengths, mismatch, step=STEP, reach=REACH):
     grid = step * np.arange(-reach, reach + 1)
     costs = np.asarray(mismatch([traded(start, subject_lengths, t) for t in grid]), float)
     table = {round(float(g), 3): float(c) for g, c in zip(grid, costs)}
-    best = int(np.argmin(costs))
-    if best in (0, len(grid) - 1):
+    if not pinned_down(table):
         return 0.0, table
+    best = int(np.argmin(costs))
     t = float(grid[best])
     below, at, above = costs[best - 1:best + 2]  # the parabola's vertex through the best point and its neighbours
     curvature = below - 2.0 * at + above
     if curvature > 0:
         t += float(np.clip(0.5 * step * (below - above) / curvature, -step, step))
     return t, table
+
+
+def pinned_down(table):
+    """Whether a search's {grid t: mismatch} (keys float, or str as saved in actor.json) has its best inside the
+    grid, not at an end."""
+    costs = {float(t): cost for t, cost in table.items()}
+    return min(costs, key=costs.get) not in (min(costs), max(costs))

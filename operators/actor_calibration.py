@@ -185,8 +185,9 @@ def describe(fit):
                          f"({_mismatches(check['mismatch'])}; fitted height {fitted:.3f} m)")
             split = check.get("split")
             if check["chosen"] == "halfway" and split:
-                grid = {float(t): cost for t, cost in split["grid"].items()}  # keys are strings once saved
-                if min(grid, key=grid.get) in (min(grid), max(grid)):
+                from ..core.trunk_leg_split import pinned_down
+
+                if not pinned_down(split["grid"]):
                     lines.append("spine and thigh split as the uniform scale has them: the person masks do not pin "
                                  "the split down here")
                 else:
