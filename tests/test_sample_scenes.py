@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 8))]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 9))]
 
 
 def scene_dir(name):
@@ -384,6 +384,19 @@ def test_actor7_has_a_short_trunk_on_long_legs():
     thigh = np.linalg.norm(P[:, names.index("LeftLeg")] - P[:, names.index("LeftUpLeg")], axis=1)
     np.testing.assert_allclose(thigh, true["l_thigh"], atol=1e-4)
     assert np.all(spine < true["spine"] + 1e-3)  # the trunk's bones bend, never lengthen
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
+
+def test_actor8_has_long_forearms_on_a_smaller_body():
+    """The seventh held-out actor: 6 % shorter than playground's subject, forearms 9 % longer than that, upper
+    arms shorter, hips narrower, shins longer; the rendered forearms are that actor's."""
+    d = scene_dir("actor8")
+    true, ratio = _actor_lengths(d)
+    for seg, relative in (("forearm", 1.09), ("upper_arm", 0.96), ("shin", 1.03), ("spine", 1.0), ("thigh", 1.0)):
+        assert ratio[seg] == pytest.approx(0.94 * relative, rel=1e-6), seg
+    assert ratio["hip_width"] < 0.94 * 0.98  # widths: joint to joint
+    names, _, P = load_gt(d)
+    forearm = np.linalg.norm(P[:, names.index("LeftHand")] - P[:, names.index("LeftForeArm")], axis=1)
+    np.testing.assert_allclose(forearm, true["l_forearm"], atol=1e-4)
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
