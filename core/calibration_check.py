@@ -1,5 +1,5 @@
 """Choose the actor's body: the user's rig as it is, or the calibration with its segments taken halfway and
-its spine / thigh split read from the masks.
+its spine / thigh split and hip width read from the masks.
 
 The landmark fit and the masks' refinement get the actor's height right to a per cent or two, but how that height
 splits into segments only roughly: BlazePose's points carry the proportions it was trained on, so where the hip
@@ -12,7 +12,8 @@ is then partly the actor's and partly an error of about the same size, so the bo
 alike). Tracking error (mm, seed 0) with the uniform scale / halfway / the full calibration: actor2 32.5 / 29.4 /
 31.4, actor3 16.4 / 18.2 / 21.0, actor4 18.3 / 18.0 / 18.9, actor5 18.6 / 18.3 / 19.3. The spine and thighs,
 whose split the landmarks do not measure, start from that uniform scale instead, and the masks set the split
-(core/trunk_leg_split.py; actor3 then tracks at 12.9 mm, its true proportions at 12.1).
+(core/trunk_leg_split.py; actor3 then tracks at 12.9 mm, its true proportions at 12.1), then the hip width
+(core/hip_width_by_masks.py).
 
 The person masks of the calibration frames then decide between the rig as it is and that body, each getting its
 own poses: every frame refitted to the masks (and landmarks) by the tracker's local fit from the poses tracked
@@ -38,13 +39,15 @@ class BodyComparison:
     mismatch: dict  # body name -> mean XOR / model area over the calibration frames' views
     bodies: dict = dataclasses.field(default_factory=dict)  # body name -> Proportions
     split: dict = dataclasses.field(default_factory=dict)   # the trunk/leg split's search (core/trunk_leg_split.py)
+    hip_width: dict = dataclasses.field(default_factory=dict)  # the hip width's (core/hip_width_by_masks.py)
 
     @property
     def chosen(self):
         return min(self.mismatch, key=lambda name: (self.mismatch[name], BODIES.index(name)))
 
     def as_dict(self):
-        return {"mismatch": dict(self.mismatch), "chosen": self.chosen, **({"split": self.split} if self.split else {})}
+        searches = {name: search for name, search in (("split", self.split), ("hip_width", self.hip_width)) if search}
+        return {"mismatch": dict(self.mismatch), "chosen": self.chosen, **searches}
 
 
 def fitted_scale(fit):
@@ -66,10 +69,11 @@ def candidate_bodies(fit):
 
 
 def compare_bodies(fit, subject, tracker, targets, rig_poses):
-    """BodyComparison of the rig and the halfway body, its trunk/leg split set by the masks
-    (core/trunk_leg_split.py), for `subject`'s tracked frames. targets: the CalibrationTargets of fit.frames
+    """BodyComparison of the rig and the halfway body, its trunk/leg split and then its hip width set by the masks
+    (core/trunk_leg_split.py, core/hip_width_by_masks.py), for `subject`'s tracked frames. targets: the CalibrationTargets of fit.frames
     (core/proportions_silhouette.calibration_targets, the ones the refinement used); rig_poses (F,D): those frames
     as tracked with the rig, every body's start (so no body starts closer to the masks)."""
+    from .hip_width_by_masks import hip_width_by_masks, widened
     from .trunk_leg_split import split_by_masks, traded
 
     def mismatch(bodies):
@@ -82,9 +86,12 @@ def compare_bodies(fit, subject, tracker, targets, rig_poses):
     level = Proportions({**halfway.factors, **{k: fitted_scale(fit) for k in halfway.factors if k == "spine" or
                                                 k.endswith("thigh")}}, halfway.overall)  # the usual split
     t, grid = split_by_masks(level, fit.subject_lengths, mismatch)
-    bodies["halfway"] = traded(level, fit.subject_lengths, t)
+    split = traded(level, fit.subject_lengths, t)
+    w, widths = hip_width_by_masks(split, mismatch)
+    bodies["halfway"] = widened(split, w)
     costs = mismatch(bodies.values())
-    return BodyComparison(dict(zip(bodies, costs)), bodies, {"spine_log_change": t, "grid": grid})
+    return BodyComparison(dict(zip(bodies, costs)), bodies, {"spine_log_change": t, "grid": grid},
+                          {"log_change": w, "grid": widths})
 
 
 def mask_mismatch(subject, proxy, cameras, masks, candidates, keypoints=None, resolution=1.0, backend="auto"):

@@ -6,14 +6,15 @@ them for each candidate body: lengthening the spine and shortening the thighs by
 kept) moves the mismatch to a minimum near the truth. Measured from the rig scaled to the fitted height, seed 0,
 the spine's log-change at the masks' minimum against the truth: actor3 -0.06 (-0.04), actor5 -0.03 (-0.02),
 actor 0.00 (0.00), actor4 +0.015 (+0.058), actor2 0.00 (+0.039): the right side or none, never the wrong one.
-So the split is searched on a grid of such trades, refined by a parabola through the best three. Where the best
-is the grid's end the masks do not pin the split down (on the real Pose2Sim capture the mismatch kept falling to
-the end, spine +9 %: loose clothes and mask edges, not trunk), and the usual split stays.
+So the split is searched on a grid of such trades (core/mask_line_search.py). Where the best is the grid's end
+the masks do not pin the split down (on the real Pose2Sim capture the mismatch kept falling to the end, spine
++9 %: loose clothes and mask edges, not trunk), and the usual split stays.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from .mask_line_search import search_line
 from .proportions import Proportions
 
 STEP = 0.03        # spine log-change between grid points
@@ -34,24 +35,6 @@ def traded(proportions, subject_lengths, t):
 
 def split_by_masks(start, subject_lengths, mismatch, step=STEP, reach=REACH):
     """The trade t of `start` (Proportions) whose body the masks match best, 0 where their best is the grid's
-    end. mismatch: a list of Proportions -> their mask mismatches (poses refitted for each).
-    Returns (t, {grid t: mismatch})."""
-    grid = step * np.arange(-reach, reach + 1)
-    costs = np.asarray(mismatch([traded(start, subject_lengths, t) for t in grid]), float)
-    table = {round(float(g), 3): float(c) for g, c in zip(grid, costs)}
-    if not pinned_down(table):
-        return 0.0, table
-    best = int(np.argmin(costs))
-    t = float(grid[best])
-    below, at, above = costs[best - 1:best + 2]  # the parabola's vertex through the best point and its neighbours
-    curvature = below - 2.0 * at + above
-    if curvature > 0:
-        t += float(np.clip(0.5 * step * (below - above) / curvature, -step, step))
-    return t, table
-
-
-def pinned_down(table):
-    """Whether a search's {grid t: mismatch} (keys float, or str as saved in actor.json) has its best inside the
-    grid, not at an end."""
-    costs = {float(t): cost for t, cost in table.items()}
-    return min(costs, key=costs.get) not in (min(costs), max(costs))
+    end (core/mask_line_search.py). mismatch: a list of Proportions -> their mask mismatches (poses refitted for
+    each). Returns (t, {grid t: mismatch})."""
+    return search_line(start, lambda body, t: traded(body, subject_lengths, t), mismatch, step, reach)

@@ -76,12 +76,12 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
 
 
 def _chosen_body(fit, session, targets, rig_poses, log):
-    """The fit's segments taken halfway, or the rig's own proportions where they match the person masks better
-    (core/calibration_check.py)."""
+    """The fit's segments taken halfway (the trunk/leg split and the hip width set by the person masks), or the
+    rig's own proportions where they match the masks better (core/calibration_check.py)."""
     from ..core.calibration_check import compare_bodies, keep_chosen
 
-    log("calibration: the spine/thigh split and the choice between the rig and the calibrated body (segments "
-        "halfway), against the person masks")
+    log("calibration: the spine/thigh split, the hip width and the choice between the rig and the calibrated body "
+        "(segments halfway), against the person masks")
     comparison = compare_bodies(fit, session.character, session.tracker, targets, rig_poses)
     log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)})")
     return keep_chosen(fit, session.character, comparison)
@@ -183,15 +183,30 @@ def describe(fit):
             fitted = check.get("fitted_lengths_m", L)["height"]
             lines.append(f"{_CHOICE[check['chosen']]}: it matches the person masks best "
                          f"({_mismatches(check['mismatch'])}; fitted height {fitted:.3f} m)")
-            split = check.get("split")
-            if check["chosen"] == "halfway" and split:
-                from ..core.trunk_leg_split import pinned_down
-
-                if not pinned_down(split["grid"]):
-                    lines.append("spine and thigh split as the uniform scale has them: the person masks do not pin "
-                                 "the split down here")
-                else:
-                    change = np.exp(split["spine_log_change"]) - 1.0
-                    lines.append(f"spine and thigh split by the person masks: the spine {100 * change:+.1f} % "
-                                 "against the uniform scale, the thighs making up the height")
+            if check["chosen"] == "halfway":
+                lines += _searched_by_masks(check)
     return lines
+
+
+def _searched_by_masks(check):
+    """One line per length the person masks were searched for (the trunk/leg split, the hip width): what they set,
+    or that they did not pin it down."""
+    from ..core.mask_line_search import pinned_down
+
+    lines = []
+    split, hips = check.get("split"), check.get("hip_width")
+    if split and not pinned_down(split["grid"]):
+        lines.append("spine and thigh split as the uniform scale has them: the person masks do not pin the split "
+                     "down here")
+    elif split:
+        lines.append(f"spine and thigh split by the person masks: the spine {_percent(split['spine_log_change'])} "
+                     "against the uniform scale, the thighs making up the height")
+    if hips and not pinned_down(hips["grid"]):
+        lines.append("hip width halfway: the person masks do not pin it down here")
+    elif hips:
+        lines.append(f"hip width set by the person masks: {_percent(hips['log_change'])} against halfway")
+    return lines
+
+
+def _percent(log_change):
+    return f"{100 * (np.exp(log_change) - 1.0):+.1f} %"

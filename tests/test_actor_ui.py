@@ -146,6 +146,10 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     fitted = check["fitted_factors"]
     assert {k for k, v in fitted.items() if v != refined["landmark_factors"][k]} <= {"forearm", "hip_width"}
     assert f"it matches the person masks best (mask mismatch rig {check['mismatch']['rig']:.3f}" in run.stderr
+    # the trunk/leg split and the hip width were searched on their grids, and the summary says what they set
+    assert len(check["split"]["grid"]) == 7 and len(check["hip_width"]["grid"]) == 9
+    if check["chosen"] == "halfway":
+        assert "spine and thigh split" in run.stderr and "hip width" in run.stderr.split("spine and thigh split")[1]
     assert json.loads((out / "report.json").read_text())["actor"]["lengths_m"] == actor["lengths_m"]
     with np.load(out / "joints.npz") as z:
         names, P = [str(n) for n in z["names"]], z["positions"]
@@ -160,3 +164,21 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     # ... not the actor's: the actor is 8 % shorter overall (the forearm, 10 % longer than scaled, may fit
     # the rig's length from three frames at this budget)
     assert abs(actor["subject_lengths_m"]["l_thigh"] - actor["lengths_m"]["l_thigh"]) > 0.01
+
+
+def test_the_summary_says_what_the_masks_set_and_what_they_did_not():
+    """The calibration summary's lines for the lengths searched against the person masks: the change where their
+    best lies inside the grid, 'do not pin it down' where it lies at an end (nothing changed then)."""
+    from markerless_mocap.operators.actor_calibration import _searched_by_masks
+
+    inside = {"-0.03": 0.20, "0.0": 0.10, "0.03": 0.15}
+    at_end = {"-0.03": 0.30, "0.0": 0.20, "0.03": 0.10}
+    lines = _searched_by_masks({"split": {"spine_log_change": float(np.log(0.95)), "grid": inside},
+                                "hip_width": {"log_change": 0.0, "grid": at_end}})
+    assert lines == ["spine and thigh split by the person masks: the spine -5.0 % against the uniform scale, the "
+                     "thighs making up the height", "hip width halfway: the person masks do not pin it down here"]
+    lines = _searched_by_masks({"split": {"spine_log_change": 0.0, "grid": at_end},
+                                "hip_width": {"log_change": float(np.log(1.042)), "grid": inside}})
+    assert lines == ["spine and thigh split as the uniform scale has them: the person masks do not pin the split "
+                     "down here", "hip width set by the person masks: +4.2 % against halfway"]
+    assert _searched_by_masks({}) == []  # a calibration saved before these searches

@@ -239,3 +239,39 @@ def test_the_masks_find_the_trunk_leg_split(walk):
     assert t == pytest.approx(np.log(0.94), abs=0.02), grid
     # a mismatch still falling at the grid's end does not pin the split down: the usual split stays
     assert split_by_masks(start, rig, lambda bodies: [-b.factors["spine"] for b in bodies])[0] == 0.0
+
+
+def test_the_masks_find_the_hip_width(walk):
+    """core/hip_width_by_masks.py: on synthetic masks of an actor whose hips are 7 % narrower, the search from the
+    rig's hip width finds it within 2.5 % (each candidate's poses refitted from the true ones pushed off); only the
+    hip width moves."""
+    from markerless_mocap.core.calibration_check import mask_mismatch
+    from markerless_mocap.core.hip_width_by_masks import hip_width_by_masks, widened
+    from markerless_mocap.core.proxy import make_proxy
+
+    body, poses = walk
+    start = Proportions({"spine": 1.0, "hip_width": 1.0, "thigh": 1.0}, 1.0)
+    narrow = widened(start, np.log(0.93))
+    assert narrow.factors == {"spine": 1.0, "hip_width": pytest.approx(0.93), "thigh": 1.0}
+    cameras = [c.scaled(0.5) for c in read_calibration(scene_dir("walk"))]
+    frames = np.arange(0, 60, 15)
+    pushed = poses[frames] + np.random.default_rng(7).normal(0.0, 0.02, poses[frames].shape)
+    masks = _synthetic_masks(scaled_body(body, narrow), cameras, poses[frames])
+    proxy = make_proxy(body, 2000)
+    t, grid = hip_width_by_masks(start, lambda bodies: mask_mismatch(body, proxy, cameras, masks,
+                                                                     [(p, pushed) for p in bodies], backend="fast"))
+    assert len(grid) == 9 and min(grid, key=grid.get) < 0
+    assert t == pytest.approx(np.log(0.93), abs=0.025), grid
+
+
+def test_a_line_search_refines_inside_the_grid_and_stops_at_its_end():
+    """core/mask_line_search.py on a known parabola: the vertex between grid points is found exactly; a cost
+    still falling at the grid's end gives no move, and pinned_down says so (keys as saved in actor.json too)."""
+    from markerless_mocap.core.mask_line_search import pinned_down, search_line
+
+    def costs(points):
+        return [(p - 0.041) ** 2 for p in points]
+    t, table = search_line(0.0, lambda start, t: start + t, costs, 0.03, 4)
+    assert t == pytest.approx(0.041, abs=1e-9) and len(table) == 9 and pinned_down(table)
+    t, table = search_line(0.0, lambda start, t: start + t, lambda points: [-p for p in points], 0.03, 4)
+    assert t == 0.0 and not pinned_down(table) and not pinned_down({str(k): v for k, v in table.items()})
