@@ -72,10 +72,10 @@ class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
             box.label(text=f"{props.subject_dofs} DOF, preset: {props.subject_preset}", icon="CHECKMARK")
         if props.subject_problems:
             _wrapped(box, props.subject_problems, context, icon="ERROR", alert=not props.subject_dofs)
-        _draw_calibration(layout.box(), props)
+        _draw_calibration(layout.box(), props, context)
 
 
-def _draw_calibration(box, props):
+def _draw_calibration(box, props, context):
     """Calibrate step: frames to use, the fitted proportions, a copy of the rig with them."""
     box.label(text="Actor Calibration", icon="CON_SIZELIKE")
     box.prop(props, "calibrate_frames")
@@ -84,8 +84,8 @@ def _draw_calibration(box, props):
         box.progress(factor=props.calibration_progress, type="BAR", text=props.calibration_status)
         box.label(text="Esc to cancel", icon="CANCEL")
     box.prop(props, "actor_file")
-    for line in props.actor_summary.splitlines():
-        box.label(text=line)
+    for line in props.actor_summary.splitlines():  # the body's choice and the masks' searches run long
+        _wrapped(box, line, context)
     if props.actor_file:
         box.prop(props, "use_actor")
         box.operator("mocap.apply_actor_copy", icon="DUPLICATE")

@@ -62,6 +62,13 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     labels = [e[1] for e in log if e[0] == "label"]
     assert lines[0] in labels and ("operator", "mocap.apply_actor_copy") in log
     assert ("prop", "calibrate_frames") in log and ("prop", "use_actor") in log
+    # a long line (the body chosen, the masks' searches) is wrapped onto several labels, not cut off
+    choice = ("took each segment halfway between the fit and the rig scaled to the fitted height: it matches the "
+              "person masks best (mask mismatch rig 0.219, halfway 0.153; fitted height 1.539 m)")
+    props.actor_summary += "\n" + choice
+    labels = [e[1] for e in _draw_all(bpy) if e[0] == "label"]
+    start = next(i for i, t in enumerate(labels) if t.startswith("took each segment"))
+    assert " ".join(labels[start:]).startswith(choice) and len(labels[start]) < len(choice) / 3, labels[start:]
 
 
 def test_calibrate_without_capture_names_the_fix(subject_with_actor):
