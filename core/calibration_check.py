@@ -70,9 +70,10 @@ def candidate_bodies(fit):
 
 def compare_bodies(fit, subject, tracker, targets, rig_poses):
     """BodyComparison of the rig and the halfway body, its trunk/leg split and then its hip width set by the masks
-    (core/trunk_leg_split.py, core/hip_width_by_masks.py), for `subject`'s tracked frames. targets: the CalibrationTargets of fit.frames
-    (core/proportions_silhouette.calibration_targets, the ones the refinement used); rig_poses (F,D): those frames
-    as tracked with the rig, every body's start (so no body starts closer to the masks)."""
+    (core/trunk_leg_split.py, core/hip_width_by_masks.py), for `subject`'s tracked frames. targets: the
+    CalibrationTargets of fit.frames (core/proportions_silhouette.calibration_targets, the ones the refinement
+    used); rig_poses (F,D): those frames as tracked with the rig, every body's start (so no body starts closer to
+    the masks)."""
     from .hip_width_by_masks import hip_width_by_masks, widened
     from .trunk_leg_split import split_by_masks, traded
 

@@ -8,7 +8,7 @@ calibrated body (segments halfway, the trunk/leg split set), log-change at the m
 truth's, seed 0: actor 0.00 (+0.007), actor2 -0.03 (-0.015), actor3 -0.03 (-0.042), actor4 +0.06 (+0.035),
 actor5 -0.06 (-0.050), walk +0.03 (0.00), actor7 +0.12 at the grid's end (+0.079). The same scans of the shoulder
 width (the wider the better on five of seven builds, actor2 -0.03 against +0.097) and of the forearm (the least
-mismatch 5-11 % from the truth on four of seven) do not pin those down, so they stay as calibrated.
+mismatch 5-11 % from the truth on five of seven) do not pin those down, so they stay as calibrated.
 """
 from __future__ import annotations
 
