@@ -27,6 +27,8 @@ def save_actor(path, fit, subject_name="", capture=""):
             "landmark_rms_m": {"subject": fit.rms_before, "calibrated": fit.rms_after}}
     if fit.silhouettes is not None:
         data["silhouettes"] = fit.silhouettes
+    if fit.measured:
+        data["measured_m"] = fit.measured
     return write_actor(path, data)
 
 

@@ -44,6 +44,7 @@ class ProportionsFit:
     # the silhouette refinement (core/proportions_silhouette.py), when it ran: the segments it refined, the
     # landmark fit's factors, the mask mismatch before and after
     silhouettes: dict | None = None
+    measured: dict | None = None  # lengths the user measured on the actor, applied (core/measured_lengths.py)
 
 
 def targets_from_landmarks(uv, visibility, rig_points):

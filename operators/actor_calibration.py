@@ -17,12 +17,16 @@ def calibration_frames(all_frames, count=DEFAULT_FRAMES):
 
 
 def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames=None, log=None, step=None,
-                    progress=None, symmetric=True, silhouettes=True):
+                    progress=None, symmetric=True, silhouettes=True, measured=None):
     """Track `frames` (default: the first DEFAULT_FRAMES) with the rig into OUT/calibration_frames/, fit the
     proportions to the landmarks, then (silhouettes=True) refine them against the person masks of the same
-    frames, write OUT/actor.json. Returns (ProportionsFit, path of actor.json)."""
+    frames, apply the lengths the user measured ({segment or "height": metres}), write OUT/actor.json.
+    Returns (ProportionsFit, path of actor.json)."""
+    from ..core.measured_lengths import with_measured
+
     session = open_calibration(scene, armature, capture_dir, out_dir, settings, frames, log, step)
-    fit = fit_calibration(session, log, progress, symmetric, silhouettes)
+    fit = with_measured(fit_calibration(session, log, progress, symmetric, silhouettes), session.character,
+                        measured)
     return fit, save_calibration(fit, out_dir, armature.name, capture_dir)
 
 
@@ -159,12 +163,14 @@ class CalibrationJob(WorkerJob):
 def describe(fit):
     """The fitted height and segment lengths, one line each (for the terminal and the panel)."""
     L, S = fit.lengths, fit.subject_lengths
-    lines = [f"height {L['height']:.3f} m (rig {S['height']:.3f} m)"]
+    measured = fit.measured or {}
+    lines = [f"height {L['height']:.3f} m (rig {S['height']:.3f} m)"
+             + (f", measured {measured['height']:.3f} m" if "height" in measured else "")]
     sided = any(k[:2] in ("l_", "r_") for k in fit.proportions.factors)
     for seg in ("spine", "neck", "shoulder_width", "hip_width", "upper_arm", "forearm", "thigh", "shin", "foot"):
         for key in ([f"l_{seg}", f"r_{seg}"] if sided and f"l_{seg}" in L else [seg]):
             lines.append(f"{key.replace('_', ' ')} {L[key] * 100:.1f} cm (rig {S[key] * 100:.1f} cm, "
-                         f"x{L[key] / S[key]:.3f})")
+                         f"x{L[key] / S[key]:.3f}){' as measured' if seg in measured else ''}")
     lines.append(f"landmark residual {fit.rms_before * 1000:.1f} mm with the rig -> {fit.rms_after * 1000:.1f} mm "
                  f"calibrated, {len(fit.frames)} frames")
     if fit.silhouettes:

@@ -18,17 +18,26 @@ def add_arguments(p):
     p.add_argument("--landmarks-only", action="store_true",
                    help="fit to the learned landmarks alone (default: then refine the forearm and hip width against "
                         "the person masks of the same frames)")
+    p.add_argument("--measured", action="append", metavar="SEGMENT=METRES",
+                   help="a length measured on the actor, used in place of the footage's: height, spine, neck, "
+                        "shoulder_width, upper_arm, forearm, hip_width, thigh, shin or foot (repeat for several)")
     add_tracking_options(p)
 
 
 def run(args):
     from ..addon.scene_bridge import SubjectError, find_armature
+    from ..core.measured_lengths import MeasuredLengthError, parse_measured
     from ..core.proportions_fit import ProportionsFitError
     from ..core.render import BackendUnavailableError
     from ..core.results import ResultWriteError
     from .actor_calibration import calibrate_actor, describe
     from .backend_choice import choose_backend
 
+    try:
+        measured = parse_measured(args.measured)
+    except MeasuredLengthError as exc:  # before anything is tracked
+        print(f"markerless_mocap calibrate: {exc}", file=sys.stderr)
+        return 2
     scene = open_subject(args.scene)
     try:
         backend = choose_backend(args.backend).used  # as track does: --backend gpu installs the GPU path
@@ -36,7 +45,7 @@ def run(args):
         fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args, backend),
                                     frames=parse_frames(args.frames), log=lambda m: print(m, file=sys.stderr),
                                     step=StepPrinter(), symmetric=not args.asymmetric,
-                                    silhouettes=not args.landmarks_only)
+                                    silhouettes=not args.landmarks_only, measured=measured)
     except (SubjectError, ProportionsFitError, ValueError, FileNotFoundError, ResultWriteError,
             BackendUnavailableError) as exc:
         print(f"markerless_mocap calibrate: {exc}", file=sys.stderr)

@@ -72,6 +72,9 @@ def add_arguments(p):
     p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 20 tracked)")
     p.add_argument("--calibrate-landmarks-only", action="store_true",
                    help="--calibrate from the landmarks alone (default: then refined against the person masks)")
+    p.add_argument("--calibrate-measured", action="append", metavar="SEGMENT=METRES",
+                   help="--calibrate with a length measured on the actor in place of the footage's (height, "
+                        "forearm, ...; repeat for several)")
     p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
                    help=f"low-pass the finished take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: keep the poses as "
                         "solved); the solved poses stay in joints_raw.npz / poses_raw.npz")
@@ -139,6 +142,12 @@ def load_actor_option(args, scene, armature, backend=None):
     """The actor calibration for --actor FILE, or the one --calibrate fits now (saved in --out); None without."""
     from ..core.actor_file import load_actor
 
+    from ..core.measured_lengths import parse_measured
+
+    measured = parse_measured(getattr(args, "calibrate_measured", None))
+    if measured and not getattr(args, "calibrate", False):
+        raise ValueError("--calibrate-measured applies to --calibrate; with --actor the saved calibration's lengths "
+                         "are used (calibrate again with --measured to change them)")
     if getattr(args, "actor", None) is not None:
         return load_actor(args.actor)
     if not getattr(args, "calibrate", False):
@@ -154,7 +163,7 @@ def load_actor_option(args, scene, armature, backend=None):
         frames = parse_frames(args.frames)[:DEFAULT_FRAMES]
     fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args, backend),
                                 frames=frames, silhouettes=not args.calibrate_landmarks_only,
-                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter())
+                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), measured=measured)
     for line in describe(fit):
         print(f"actor: {line}", file=sys.stderr)
     return load_actor(path)

@@ -95,6 +95,28 @@ def test_fit_recovers_known_proportions_from_landmarks(walk):
         assert fit.proportions.factor(seg) == pytest.approx(1.0, abs=0.02), seg
 
 
+def test_measured_lengths_replace_the_calibrated_ones(walk):
+    """A measured forearm gives the body exactly that forearm and leaves every other segment as calibrated; a
+    measured height scales the whole body to it first; with sided factors both sides take the measurement."""
+    from markerless_mocap.core.measured_lengths import measured_proportions
+
+    body, _ = walk
+    before = segment_lengths(scaled_body(body, ACTOR))
+    after = segment_lengths(scaled_body(body, measured_proportions(body, ACTOR, {"forearm": 0.25})))
+    assert after["forearm"] == pytest.approx(0.25, rel=1e-6)
+    for seg in ("height", "spine", "neck", "shoulder_width", "upper_arm", "hip_width", "thigh", "shin", "foot"):
+        assert after[seg] == pytest.approx(before[seg], rel=1e-9), seg
+    both = segment_lengths(scaled_body(body, measured_proportions(body, ACTOR, {"height": 1.60,
+                                                                                "shoulder_width": 0.36})))
+    assert both["height"] == pytest.approx(1.60, rel=1e-6) and both["shoulder_width"] == pytest.approx(0.36, rel=1e-6)
+    scale = 1.60 / before["height"]
+    for seg in ("spine", "upper_arm", "forearm", "thigh"):
+        assert both[seg] == pytest.approx(before[seg] * scale, rel=1e-6), seg
+    sided = Proportions({"l_forearm": 0.95, "r_forearm": 1.05, "thigh": 0.97}, 0.97)
+    got = segment_lengths(scaled_body(body, measured_proportions(body, sided, {"forearm": 0.24})))
+    assert got["l_forearm"] == pytest.approx(0.24, rel=1e-6) and got["r_forearm"] == pytest.approx(0.24, rel=1e-6)
+
+
 def test_lengths_carry_over_to_another_rig(walk):
     body, _ = walk
     target = segment_lengths(scaled_body(body, ACTOR))
