@@ -79,6 +79,7 @@ def _draw_calibration(box, props, context):
     """Calibrate step: frames to use, the fitted proportions, a copy of the rig with them."""
     box.label(text="Actor Calibration", icon="CON_SIZELIKE")
     box.prop(props, "calibrate_frames")
+    box.prop(props, "actor_height")
     box.operator("mocap.calibrate_actor", icon="MOD_ARMATURE")
     if props.is_calibrating:
         box.progress(factor=props.calibration_progress, type="BAR", text=props.calibration_status)

@@ -17,6 +17,13 @@ def _calibration_frames(props):
     return range(start, end + 1)
 
 
+def _measured(props):
+    """The lengths measured on the actor that the panel holds: the height when set."""
+    from ..core.measured_lengths import parse_measured
+
+    return parse_measured([f"height={props.actor_height}"] if props.actor_height > 0 else [])
+
+
 def show_calibration(props, actor_path, lines):
     props.actor_file = str(actor_path)
     props.actor_summary = "\n".join(lines)
@@ -70,7 +77,7 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         try:
             armature, capture_dir, out_dir, settings = self._inputs(context)
             fit, path = calibrate_actor(context.scene, armature, capture_dir, out_dir, settings,
-                                        frames=_calibration_frames(props))
+                                        frames=_calibration_frames(props), measured=_measured(props))
         except (ValueError, ProportionsFitError, FileNotFoundError, OSError) as exc:
             return self._fail(context, str(exc))
         except Exception as exc:
@@ -91,6 +98,7 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             if settings.backend == "gpu":
                 return self.execute(context)
             frames = _calibration_frames(props)
+            self._measured = _measured(props)  # checked before anything is tracked
             session = open_calibration(context.scene, armature, capture_dir, out_dir, settings, frames=frames)
         except (ValueError, FileNotFoundError, OSError) as exc:
             return self._fail(context, str(exc))
@@ -135,11 +143,14 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         if job.fit is None:  # cancelled before the fit
             self.report({"WARNING"}, f"Calibration cancelled after {job.solved} frames; nothing saved")
             return {"CANCELLED"}
+        from ..core.measured_lengths import with_measured
+
+        fit = with_measured(job.fit, job.session.character, self._measured)
         try:
-            path = save_calibration(job.fit, *self._save_args)
+            path = save_calibration(fit, *self._save_args)
         except OSError as exc:
             return self._fail(context, f"could not save the calibration: {exc}")
-        return self._show_result(context, job.fit, path)
+        return self._show_result(context, fit, path)
 
     def cancel(self, context):
         """Blender ends the operator (file loaded, window closed): stop the worker, save nothing."""

@@ -40,8 +40,8 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     bpy, mod, arm, body, fit, path = subject_with_actor
     calls = {}
 
-    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, **_):
-        calls.update(armature=armature.name, frames=list(frames), out=out_dir)
+    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, measured=None, **_):
+        calls.update(armature=armature.name, frames=list(frames), out=out_dir, measured=measured)
         return fit, path
 
     monkeypatch.setattr(mod("operators.actor_calibration"), "calibrate_actor", fake_calibrate)
@@ -50,6 +50,10 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     props.use_frame_range, props.frame_start, props.frame_end, props.calibrate_frames = True, 5, 40, 12
     assert bpy.ops.mocap.calibrate_actor() == {"FINISHED"}
     assert calls["armature"] == arm.name and calls["frames"] == list(range(5, 17))
+    assert calls["measured"] == {}  # no height measured: the footage's
+    props.actor_height = 1.62
+    assert bpy.ops.mocap.calibrate_actor() == {"FINISHED"}
+    assert calls["measured"] == {"height": pytest.approx(1.62, rel=1e-6)}
     assert props.actor_file == str(path) and props.use_actor
     lines = props.actor_summary.splitlines()
     assert lines[0] == f"height {fit.lengths['height']:.3f} m (rig {fit.subject_lengths['height']:.3f} m)"
@@ -61,7 +65,7 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     log = _draw_all(bpy)
     labels = [e[1] for e in log if e[0] == "label"]
     assert lines[0] in labels and ("operator", "mocap.apply_actor_copy") in log
-    assert ("prop", "calibrate_frames") in log and ("prop", "use_actor") in log
+    assert ("prop", "calibrate_frames") in log and ("prop", "actor_height") in log and ("prop", "use_actor") in log
     # a long line (the body chosen, the masks' searches) is wrapped onto several labels, not cut off
     choice = ("took each segment halfway between the fit and the rig scaled to the fitted height: it matches the "
               "person masks best (mask mismatch rig 0.219, halfway 0.153; fitted height 1.539 m)")
@@ -136,12 +140,17 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     run = subprocess.run([sys.executable, "-m", "markerless_mocap", "track", "--scene", str(scene / "subject.blend"),
                           "--capture", str(scene), "--out", str(out), "--calibrate", "--calibrate-frames", "0-2",
                           "--frames", "0-1", "--particles", "10", "--iterations", "2", "--refine", "none",
-                          "--no-overlays"], capture_output=True, text=True, timeout=600)
+                          "--no-overlays", "--calibrate-measured", "forearm=0.245"],
+                         capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "actor: height" in run.stderr
+    # the forearm as measured on the actor (a tape measure's 24.5 cm), not as the footage gave it
+    assert "forearm 24.5 cm (rig 23.9 cm, x1.027) as measured" in run.stderr
     assert "refined against the person masks (mismatch" in run.stderr
     actor = load_actor(out / "actor.json")
     assert actor["frames"] == [0, 1, 2] and 1.3 < actor["height_m"] < 1.8
+    assert actor["measured_m"] == {"forearm": 0.245}
+    assert actor["lengths_m"]["l_forearm"] == pytest.approx(0.245, rel=1e-6)
     # the landmark fit, then the masks refined the forearm and hip width (and nothing else)
     refined = actor["silhouettes"]
     assert refined["segments"] == ["forearm", "hip_width"]
@@ -171,6 +180,26 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     # ... not the actor's: the actor is 8 % shorter overall (the forearm, 10 % longer than scaled, may fit
     # the rig's length from three frames at this budget)
     assert abs(actor["subject_lengths_m"]["l_thigh"] - actor["lengths_m"]["l_thigh"]) > 0.01
+
+
+def test_a_mistyped_measured_length_stops_before_anything_is_tracked(tmp_path):
+    """`calibrate --measured` with an unknown segment or centimetres for metres: exit 2 at once, one line naming
+    the problem and the fix; `track --calibrate-measured` without --calibrate says what it applies to."""
+    scene = subject_blend_path().parents[1] / "actor"
+    base = [sys.executable, "-m", "markerless_mocap", "calibrate", "--scene", str(scene / "subject.blend"),
+            "--capture", str(scene), "--out", str(tmp_path / "c")]
+    for bad, says in (("tail=0.3", "SEGMENT one of height, spine, neck"), ("forearm=24.5", "give metres"),
+                      ("forearm", "give SEGMENT=METRES"), ("height=tall", "'tall' is not a number")):
+        run = subprocess.run(base + ["--measured", bad], capture_output=True, text=True, timeout=120)
+        assert run.returncode == 2, bad
+        last = run.stderr.strip().splitlines()[-1]
+        assert last.startswith("markerless_mocap calibrate: --measured") and says in last, last
+    assert not (tmp_path / "c").exists()
+    run = subprocess.run([sys.executable, "-m", "markerless_mocap", "track", "--scene", str(scene / "subject.blend"),
+                          "--capture", str(scene), "--out", str(tmp_path / "t"), "--actor", str(tmp_path / "a.json"),
+                          "--calibrate-measured", "height=1.6"], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert "--calibrate-measured applies to --calibrate" in run.stderr.strip().splitlines()[-1]
 
 
 def test_the_summary_says_what_the_masks_set_and_what_they_did_not():

@@ -155,8 +155,10 @@ def invoke_modal(operator, name, started_key, watcher):
 
 @guarded
 def step_calibrate():
-    """Calibrate Actor on 3 frames (the modal operator): the UI keeps ticking, the fitted height shows."""
+    """Calibrate Actor on 3 frames (the modal operator) with a measured height: the UI keeps ticking, the
+    calibrated height shows (the measured one)."""
     props().calibrate_frames = 3
+    props().actor_height = 1.55
     result = invoke_modal(bpy.ops.mocap.calibrate_actor, "Calibrate", "calibrate_started", step_watch_calibration)
     report["calibrate"] = {"invoke": result, "status_lines": [], "ticks": 0}
 

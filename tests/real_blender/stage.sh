@@ -210,8 +210,9 @@ check(r.get("preset") == {"name": "preview", "budget": [50, 4], "local_fit_fine"
       f"the Preview preset: {r.get('preset')}")
 cal = r.get("calibrate", {})
 check(cal.get("invoke") == ["RUNNING_MODAL"], f"Calibrate Actor did not run modal: {cal.get('invoke')}")
-check(bool(cal.get("summary")) and cal["summary"][0].startswith("height ") and cal.get("use_actor"),
-      f"no calibrated height shown: {cal.get('summary')} {cal.get('error')!r}")
+check(bool(cal.get("summary")) and cal["summary"][0].startswith("height 1.550 m (rig ")
+      and cal["summary"][0].endswith("measured 1.550 m") and cal.get("use_actor"),
+      f"no calibrated height (the measured 1.550 m) shown: {cal.get('summary')} {cal.get('error')!r}")
 check(any(l.startswith("Calibrating: frame ") for l in cal.get("status_lines", [])), "no calibration progress line")
 check(cal.get("ticks", 0) >= 5, f"the UI timer ticked {cal.get('ticks')} times while calibrating")
 check(r.get("track_invoke") == ["RUNNING_MODAL"], "Track did not run modal")
