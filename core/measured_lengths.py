@@ -69,8 +69,8 @@ def measured_proportions(subject, proportions, measured, iterations=12, toleranc
 
 def with_measured(fit, subject, measured):
     """The ProportionsFit `fit` with the measured lengths applied and recorded (fit.measured); `fit` itself
-    when nothing was measured."""
-    if not measured:
+    when nothing was measured, or None (a cancelled calibration)."""
+    if not measured or fit is None:
         return fit
     proportions = measured_proportions(subject, fit.proportions, measured)
     return dataclasses.replace(fit, proportions=proportions,
