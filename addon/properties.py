@@ -92,7 +92,7 @@ class MocapSettings(bpy.types.PropertyGroup):
     calibrate_frames: IntProperty(name="Calibration Frames", default=20, min=3, soft_max=60,
                                   description="Fit the actor's proportions on this many frames from the start of "
                                               "the tracked range")
-    actor_height: FloatProperty(name="Measured Height", default=0.0, min=0.0, max=2.6, subtype="DISTANCE",
+    actor_height: FloatProperty(name="Measured Height", default=0.0, min=0.0, max=3.0, subtype="DISTANCE",
                                 unit="LENGTH", description="The actor's height if you have measured it: the "
                                 "calibrated body is scaled to it (0: as the footage gives it)")
     actor_file: StringProperty(name="Actor Calibration", subtype="FILE_PATH",

@@ -13,7 +13,9 @@ import dataclasses
 from .proportions import SEGMENTS, Proportions, scaled_body, segment_lengths
 
 MEASURABLE = ("height",) + SEGMENTS
-SHORTEST_M, LONGEST_M = 0.02, 2.6   # a length outside these is a typo (centimetres for metres, say)
+# A length outside these is a typo (centimetres for metres, say): metres, (shortest, longest)
+HEIGHT_RANGE_M = (0.5, 2.5)     # as the rig check's "a person" (0.5-3 m), a little tighter
+SEGMENT_RANGE_M = (0.02, 1.2)   # a foot's or a neck's few centimetres to a long spine
 
 
 class MeasuredLengthError(ValueError):
@@ -34,9 +36,10 @@ def parse_measured(items):
             metres = float(value)
         except ValueError:
             raise MeasuredLengthError(f"--measured {item!r}: {value!r} is not a number of metres") from None
-        if not SHORTEST_M <= metres <= LONGEST_M:
-            raise MeasuredLengthError(f"--measured {item!r}: {metres} m is not a {name.replace('_', ' ')} of a "
-                                      f"person; give metres ({SHORTEST_M}-{LONGEST_M})")
+        shortest, longest = HEIGHT_RANGE_M if name == "height" else SEGMENT_RANGE_M
+        if not shortest <= metres <= longest:
+            raise MeasuredLengthError(f"--measured {item!r}: {metres:g} m is not a {name.replace('_', ' ')} of a "
+                                      f"person; give metres ({shortest:g}-{longest:g})")
         out[name] = metres
     return out
 

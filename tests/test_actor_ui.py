@@ -54,6 +54,10 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     props.actor_height = 1.62
     assert bpy.ops.mocap.calibrate_actor() == {"FINISHED"}
     assert calls["measured"] == {"height": pytest.approx(1.62, rel=1e-6)}
+    props.actor_height = 2.9  # a typo: no person is that tall
+    with pytest.raises(RuntimeError, match="2.9 m is not a height of a person; give metres"):
+        bpy.ops.mocap.calibrate_actor()
+    props.actor_height = 1.62
     assert props.actor_file == str(path) and props.use_actor
     lines = props.actor_summary.splitlines()
     assert lines[0] == f"height {fit.lengths['height']:.3f} m (rig {fit.subject_lengths['height']:.3f} m)"
@@ -188,7 +192,8 @@ def test_a_mistyped_measured_length_stops_before_anything_is_tracked(tmp_path):
     scene = subject_blend_path().parents[1] / "actor"
     base = [sys.executable, "-m", "markerless_mocap", "calibrate", "--scene", str(scene / "subject.blend"),
             "--capture", str(scene), "--out", str(tmp_path / "c")]
-    for bad, says in (("tail=0.3", "SEGMENT one of height, spine, neck"), ("forearm=24.5", "give metres"),
+    for bad, says in (("tail=0.3", "SEGMENT one of height, spine, neck"), ("forearm=24.5", "give metres (0.02-1.2)"),
+                      ("height=172", "172 m is not a height of a person; give metres (0.5-2.5)"),
                       ("forearm", "give SEGMENT=METRES"), ("height=tall", "'tall' is not a number")):
         run = subprocess.run(base + ["--measured", bad], capture_output=True, text=True, timeout=120)
         assert run.returncode == 2, bad
