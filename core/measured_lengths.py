@@ -22,6 +22,16 @@ class MeasuredLengthError(ValueError):
     """A measured length that cannot be used: unknown segment, not a number, not a length of a person."""
 
 
+def checked_length(name, metres):
+    """`metres` as a measured `name` (height or a segment), or a MeasuredLengthError saying it is no length of a
+    person and which range is."""
+    shortest, longest = HEIGHT_RANGE_M if name == "height" else SEGMENT_RANGE_M
+    if not shortest <= metres <= longest:
+        raise MeasuredLengthError(f"{metres:g} m is not a {name.replace('_', ' ')} of a person; give metres "
+                                  f"({shortest:g}-{longest:g})")
+    return float(metres)
+
+
 def parse_measured(items):
     """{segment: metres} from strings like "forearm=0.245" (the --measured options); a one-line
     MeasuredLengthError naming the problem and the fix."""
@@ -33,14 +43,10 @@ def parse_measured(items):
             raise MeasuredLengthError(f"--measured {item!r}: give SEGMENT=METRES with SEGMENT one of "
                                       f"{', '.join(MEASURABLE)} (for example forearm=0.245)")
         try:
-            metres = float(value)
-        except ValueError:
-            raise MeasuredLengthError(f"--measured {item!r}: {value!r} is not a number of metres") from None
-        shortest, longest = HEIGHT_RANGE_M if name == "height" else SEGMENT_RANGE_M
-        if not shortest <= metres <= longest:
-            raise MeasuredLengthError(f"--measured {item!r}: {metres:g} m is not a {name.replace('_', ' ')} of a "
-                                      f"person; give metres ({shortest:g}-{longest:g})")
-        out[name] = metres
+            out[name] = checked_length(name, float(value))
+        except ValueError as exc:  # not a number, or not a person's
+            reason = exc if isinstance(exc, MeasuredLengthError) else f"{value!r} is not a number of metres"
+            raise MeasuredLengthError(f"--measured {item!r}: {reason}") from None
     return out
 
 

@@ -19,9 +19,14 @@ def _calibration_frames(props):
 
 def _measured(props):
     """The lengths measured on the actor that the panel holds: the height when set."""
-    from ..core.measured_lengths import parse_measured
+    from ..core.measured_lengths import MeasuredLengthError, checked_length
 
-    return parse_measured([f"height={props.actor_height}"] if props.actor_height > 0 else [])
+    if props.actor_height <= 0:
+        return {}
+    try:
+        return {"height": checked_length("height", props.actor_height)}
+    except MeasuredLengthError as exc:
+        raise MeasuredLengthError(f"Measured Height: {exc}") from None
 
 
 def show_calibration(props, actor_path, lines):

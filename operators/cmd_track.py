@@ -141,7 +141,6 @@ def run_session(session, progress=None, log=print):
 def load_actor_option(args, scene, armature, backend=None):
     """The actor calibration for --actor FILE, or the one --calibrate fits now (saved in --out); None without."""
     from ..core.actor_file import load_actor
-
     from ..core.measured_lengths import parse_measured
 
     measured = parse_measured(getattr(args, "calibrate_measured", None))
