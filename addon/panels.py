@@ -6,7 +6,7 @@ import textwrap
 
 import bpy
 
-from .properties import CAMERA_COLLECTION
+from .properties import CAMERA_COLLECTION, MEASURED_SEGMENTS
 
 CATEGORY = "Mocap"
 
@@ -80,6 +80,7 @@ def _draw_calibration(box, props, context):
     box.label(text="Actor Calibration", icon="CON_SIZELIKE")
     box.prop(props, "calibrate_frames")
     box.prop(props, "actor_height")
+    _draw_measured_segments(box, props)
     box.operator("mocap.calibrate_actor", icon="MOD_ARMATURE")
     if props.is_calibrating:
         box.progress(factor=props.calibration_progress, type="BAR", text=props.calibration_status)
@@ -90,6 +91,18 @@ def _draw_calibration(box, props, context):
     if props.actor_file:
         box.prop(props, "use_actor")
         box.operator("mocap.apply_actor_copy", icon="DUPLICATE")
+
+
+def _draw_measured_segments(layout, props):
+    """The segments measured on the actor, folded away: most users measure at most the height."""
+    header, body = layout.panel("MOCAP_measured_lengths", default_closed=True)
+    set_count = sum(getattr(props, f"actor_{key}") > 0 for key, _label, _where in MEASURED_SEGMENTS)
+    header.label(text=f"Measured Lengths ({set_count} set)" if set_count else "Measured Lengths")
+    if body is None:
+        return
+    body.label(text="0: as the footage gives it")
+    for key, label, _where in MEASURED_SEGMENTS:
+        body.prop(props, f"actor_{key}", text=label)
 
 
 class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):

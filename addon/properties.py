@@ -68,6 +68,29 @@ UNITS = (
 CAMERA_COLLECTION = "Mocap Cameras"
 
 
+# Where each segment a user can measure starts and ends on the actor (the rig's joints, core/proportions.py)
+MEASURED_SEGMENTS = (
+    ("spine", "Spine", "from the pelvis, between the hip joints, to the base of the neck"),
+    ("neck", "Neck", "from the base of the neck to the base of the skull"),
+    ("shoulder_width", "Shoulder Width", "between the centres of the two shoulder joints"),
+    ("hip_width", "Hip Width", "between the centres of the two hip joints"),
+    ("upper_arm", "Upper Arm", "shoulder joint to elbow"),
+    ("forearm", "Forearm", "elbow to wrist"),
+    ("thigh", "Thigh", "hip joint to knee"),
+    ("shin", "Shin", "knee to ankle"),
+    ("foot", "Foot", "ankle to the base of the toes"),
+)
+
+
+def _measured_length(segment):
+    """A length measured on the actor, 0 while unmeasured (the calibration's from the footage)."""
+    label, where = next((label, where) for key, label, where in MEASURED_SEGMENTS if key == segment)
+    # no tight max: a typo (24.5 for 0.245) must reach the range check and be named, not clamped to look valid
+    return FloatProperty(name=f"Measured {label}", default=0.0, min=0.0, max=1000.0, soft_max=1.2, precision=3,
+                         subtype="DISTANCE", unit="LENGTH", description=f"The actor's {label.lower()} ({where}) if you have measured "
+                         "it: the calibrated body gets exactly this length (0: as the footage gives it)")
+
+
 def _is_armature(_self, obj):
     return obj.type == "ARMATURE"
 
@@ -92,9 +115,19 @@ class MocapSettings(bpy.types.PropertyGroup):
     calibrate_frames: IntProperty(name="Calibration Frames", default=20, min=3, soft_max=60,
                                   description="Fit the actor's proportions on this many frames from the start of "
                                               "the tracked range")
-    actor_height: FloatProperty(name="Measured Height", default=0.0, min=0.0, max=3.0, subtype="DISTANCE",
-                                unit="LENGTH", description="The actor's height if you have measured it: the "
+    actor_height: FloatProperty(name="Measured Height", default=0.0, min=0.0, max=3.0, precision=3,
+                                subtype="DISTANCE", unit="LENGTH", description="The actor's height if you have measured it: the "
                                 "calibrated body is scaled to it (0: as the footage gives it)")
+    # the footage reads some lengths only within 5-10 % (README, "Actor calibration"); a tape measure's win
+    actor_spine: _measured_length("spine")
+    actor_neck: _measured_length("neck")
+    actor_shoulder_width: _measured_length("shoulder_width")
+    actor_hip_width: _measured_length("hip_width")
+    actor_upper_arm: _measured_length("upper_arm")
+    actor_forearm: _measured_length("forearm")
+    actor_thigh: _measured_length("thigh")
+    actor_shin: _measured_length("shin")
+    actor_foot: _measured_length("foot")
     actor_file: StringProperty(name="Actor Calibration", subtype="FILE_PATH",
                                description="actor.json of the calibration (written by Calibrate Actor, or of an "
                                            "earlier take of the same actor)")

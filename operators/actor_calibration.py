@@ -177,7 +177,9 @@ def describe(fit):
         refined = fit.silhouettes
         mismatch = refined["mask_mismatch"]
         kept = refined.get("kept_at_landmark_fit", [])
-        moved = [s.replace("_", " ") for s in refined["segments"] if s not in kept]
+        # a measured segment's length is the tape's, whatever the footage made of it
+        moved = [s.replace("_", " ") for s in refined["segments"] if s not in kept and s not in measured]
+        kept = [s for s in kept if s not in measured]
         if moved:
             lines.append(f"{' and '.join(moved)} refined against the person masks (mismatch "
                          f"{mismatch['landmark_fit']:.3f} -> {mismatch['refined']:.3f})")

@@ -18,15 +18,23 @@ def _calibration_frames(props):
 
 
 def _measured(props):
-    """The lengths measured on the actor that the panel holds: the height when set."""
+    """The lengths measured on the actor that the panel holds ({"height" or segment: metres}), those set (> 0);
+    a MeasuredLengthError naming the field of one that is no length of a person."""
+    from ..addon.properties import MEASURED_SEGMENTS
     from ..core.measured_lengths import MeasuredLengthError, checked_length
 
-    if props.actor_height <= 0:
-        return {}
-    try:
-        return {"height": checked_length("height", props.actor_height)}
-    except MeasuredLengthError as exc:
-        raise MeasuredLengthError(f"Measured Height: {exc}") from None
+    fields = [("height", "actor_height")] + [(key, f"actor_{key}") for key, _label, _where in MEASURED_SEGMENTS]
+    measured = {}
+    for name, field in fields:
+        metres = getattr(props, field)
+        if metres <= 0:
+            continue
+        try:
+            measured[name] = checked_length(name, metres)
+        except MeasuredLengthError as exc:
+            label = props.bl_rna.properties[field].name
+            raise MeasuredLengthError(f"{label}: {exc}") from None
+    return measured
 
 
 def show_calibration(props, actor_path, lines):

@@ -58,6 +58,13 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     with pytest.raises(RuntimeError, match="2.9 m is not a height of a person; give metres"):
         bpy.ops.mocap.calibrate_actor()
     props.actor_height = 1.62
+    props.actor_forearm = 0.245  # a tape measure's forearm, with the height
+    assert bpy.ops.mocap.calibrate_actor() == {"FINISHED"}
+    assert calls["measured"] == {"height": pytest.approx(1.62, rel=1e-6), "forearm": pytest.approx(0.245, rel=1e-6)}
+    props.actor_forearm = 24.5  # centimetres typed for metres: named, not clamped into a plausible length
+    with pytest.raises(RuntimeError, match="Measured Forearm: 24.5 m is not a forearm of a person; give metres"):
+        bpy.ops.mocap.calibrate_actor()
+    props.actor_forearm = 0.245
     assert props.actor_file == str(path) and props.use_actor
     lines = props.actor_summary.splitlines()
     assert lines[0] == f"height {fit.lengths['height']:.3f} m (rig {fit.subject_lengths['height']:.3f} m)"
@@ -70,6 +77,12 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     labels = [e[1] for e in log if e[0] == "label"]
     assert lines[0] in labels and ("operator", "mocap.apply_actor_copy") in log
     assert ("prop", "calibrate_frames") in log and ("prop", "actor_height") in log and ("prop", "use_actor") in log
+    # the measured segments, folded away, every one of the calibration's segments there; the header counts those set
+    from markerless_mocap.core.proportions import SEGMENTS
+
+    assert ("panel", "MOCAP_measured_lengths", True) in log
+    assert {e[1] for e in log if e[0] == "prop" and e[1].startswith("actor_")} >= {f"actor_{s}" for s in SEGMENTS}
+    assert "Measured Lengths (1 set)" in labels
     # a long line (the body chosen, the masks' searches) is wrapped onto several labels, not cut off
     choice = ("took each segment halfway between the fit and the rig scaled to the fitted height: it matches the "
               "person masks best (mask mismatch rig 0.219, halfway 0.153; fitted height 1.539 m)")
@@ -150,8 +163,11 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     assert "actor: height" in run.stderr
     # the forearm as measured on the actor (a tape measure's 24.5 cm), not as the footage gave it
     assert "forearm 24.5 cm (rig 23.9 cm, x1.027) as measured" in run.stderr
-    assert "refined against the person masks (mismatch" in run.stderr
     actor = load_actor(out / "actor.json")
+    # the masks' refinement is reported for the hip width, not for the forearm the tape measure replaced
+    kept = actor["silhouettes"]["kept_at_landmark_fit"]
+    assert ("hip width refined against the person masks (mismatch" in run.stderr) == ("hip_width" not in kept)
+    assert "forearm and hip width refined" not in run.stderr and "forearm refined" not in run.stderr
     assert actor["frames"] == [0, 1, 2] and 1.3 < actor["height_m"] < 1.8
     assert actor["measured_m"] == {"forearm": 0.245}
     assert actor["lengths_m"]["l_forearm"] == pytest.approx(0.245, rel=1e-6)

@@ -168,6 +168,15 @@ class _FakeLayout:
         self._check_icon(icon)
         self.log.append(("label", text))
 
+    def panel(self, idname, default_closed=False):
+        """A layout panel (Blender 4.1+), drawn open here so the test sees what it holds."""
+        import bpy
+
+        params = {p.identifier for p in bpy.types.UILayout.bl_rna.functions["panel"].parameters}
+        assert {"idname", "default_closed"} <= params
+        self.log.append(("panel", idname, default_closed))
+        return _FakeLayout(self.log), _FakeLayout(self.log)
+
     def progress(self, factor=0.0, type="BAR", text=""):
         assert 0.0 <= factor <= 1.0 and type in {"BAR", "RING"}
         self.log.append(("progress", factor, text))

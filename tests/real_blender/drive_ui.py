@@ -155,10 +155,11 @@ def invoke_modal(operator, name, started_key, watcher):
 
 @guarded
 def step_calibrate():
-    """Calibrate Actor on 3 frames (the modal operator) with a measured height: the UI keeps ticking, the
-    calibrated height shows (the measured one)."""
+    """Calibrate Actor on 3 frames (the modal operator) with a measured height and forearm: the UI keeps ticking,
+    the calibrated height and forearm show (the measured ones)."""
     props().calibrate_frames = 3
     props().actor_height = 1.55
+    props().actor_forearm = 0.25  # Measured Lengths > Forearm
     result = invoke_modal(bpy.ops.mocap.calibrate_actor, "Calibrate", "calibrate_started", step_watch_calibration)
     report["calibrate"] = {"invoke": result, "status_lines": [], "ticks": 0}
 

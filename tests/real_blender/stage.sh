@@ -198,6 +198,8 @@ timeout 420 chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURC
 kill "$xvfb_pid" 2>/dev/null || true
 log "UI run took $(( $(date +%s) - t1 )) s"
 grep '^STAGE-UI' "$out/ui.log" | sed 's/^STAGE-UI/[stage-ui]/'
+# a panel's draw that raises only prints its traceback: the sidebar would show half a panel
+grep -q Traceback "$out/ui.log" && fail "the UI run printed a traceback (a panel's draw?); see $out/ui.log"
 python3 - "$out/ui/ui_report.json" <<'PY' || fail "the UI run did not do what a user does; see $out/ui.log and $out/ui/"
 import json, re, sys
 r = json.load(open(sys.argv[1]))
@@ -213,6 +215,8 @@ check(cal.get("invoke") == ["RUNNING_MODAL"], f"Calibrate Actor did not run moda
 check(bool(cal.get("summary")) and cal["summary"][0].startswith("height 1.550 m (rig ")
       and cal["summary"][0].endswith("measured 1.550 m") and cal.get("use_actor"),
       f"no calibrated height (the measured 1.550 m) shown: {cal.get('summary')} {cal.get('error')!r}")
+check(any(l.startswith("forearm 25.0 cm (rig ") and l.endswith(" as measured") for l in cal.get("summary", [])),
+      f"no measured forearm (25.0 cm) shown: {cal.get('summary')}")
 check(any(l.startswith("Calibrating: frame ") for l in cal.get("status_lines", [])), "no calibration progress line")
 check(cal.get("ticks", 0) >= 5, f"the UI timer ticked {cal.get('ticks')} times while calibrating")
 check(r.get("track_invoke") == ["RUNNING_MODAL"], "Track did not run modal")
