@@ -1,0 +1,131 @@
+"""Scan the forearm's factor against person masks, with or without a wrist in the model, and print where the
+least mismatch lies against the actor's true forearm (README, "Actor calibration", a wrist in the model).
+
+Each candidate body (the calibration's, its forearm scaled by exp(step), steps -12 % to +12 % by 3 %) gets
+its frames refitted to the masks and landmarks by the tracker's local fit from the calibration's poses, then
+its XOR / model area (core/calibration_check.mask_mismatch, as the calibration's body choice). With --wrist the
+model gets two more angles per hand (flexion and deviation of the bone that ends the forearm), so the hand's
+outline can bend as the actor's does. Measured (session 24): with the true masks the wrist brings 4 of 7
+builds within 3 % (1 of 7 without); with the learned masks 2 of 7.
+
+    .venv/bin/python tools/forearm_mask_scan.py RESULT:SCENE [RESULT:SCENE ...] [--wrist]
+        [--masks true|learned|plate|learned-and-plate] [--frames 0,10,20,29,39] [--threshold 0.5]
+
+RESULT: a `track --calibrate` result folder (actor.json, poses.npz, keypoints.npz) of SCENE, a capture folder
+with subject.blend and scene_info.json > actor (the true proportions); --masks true also needs gt_masks/ (the
+sample scenes have frames 0, 10, 20, 29, 39).
+"""
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+STEPS = np.arange(-4, 5) * 0.03
+WRIST_LIMIT = 1.2  # radians either way: a bent wrist, not a broken one
+
+
+def with_wrist(body):
+    """`body` with a flexion and a deviation angle on each hand (the bone that continues the forearm), appended
+    after its own DOF so its pose vectors extend with zeros."""
+    from markerless_mocap.core.body import Body, Dof, DofTarget
+    from markerless_mocap.core.keypoints import end_bone
+
+    extra = []
+    for side in "lr":
+        hand = end_bone(body, f"{side}_elbow")
+        for name, axis in (("flex", (1.0, 0.0, 0.0)), ("deviation", (0.0, 0.0, 1.0))):
+            extra.append(Dof(f"{side}_wrist.{name}", "angle", -WRIST_LIMIT, WRIST_LIMIT, f"{side}_elbow", "",
+                             [DofTarget(hand, np.array(axis), 1.0)]))
+    return Body(body.skeleton, body.dofs + extra, body.vertices, body.faces, body.weights, body.root_bone,
+                body.roles, body.preset), len(extra)
+
+
+def scene_masks(kind, scene, tracker, frames, poses, threshold):
+    """(per frame one bool mask per camera, the cameras at the masks' resolution)."""
+    import cv2
+
+    import markerless_mocap.core.features.learned as learned_model
+    from markerless_mocap.core.proportions_silhouette import calibration_masks
+
+    cams = tracker.capture.cameras
+    if kind == "true":
+        masks = []
+        for f in frames:
+            views = [cv2.imread(str(scene / "gt_masks" / c.name / f"{f:04d}.png"), cv2.IMREAD_GRAYSCALE) for c in cams]
+            if any(v is None for v in views):
+                raise SystemExit(f"{scene.name}: no true mask of frame {f} in gt_masks/ (use --frames)")
+            masks.append([v > 127 for v in views])
+        return masks, cams
+    learned_model.MASK_THRESHOLD = threshold
+    learned, learned_cams = calibration_masks(tracker, frames, poses)
+    if kind == "learned":
+        return learned, learned_cams
+    plate = [[np.asarray(tracker.backgrounds[c.name].silhouette(img[c.name]), bool) for c in cams]
+             for img in (tracker.capture.frames.read(f) for f in frames)]
+    if kind == "plate":
+        return plate, cams
+    return [[m & (cv2.resize(p.astype(np.uint8), m.shape[::-1], interpolation=cv2.INTER_AREA) > 0)
+             for m, p in zip(lf, pf)] for lf, pf in zip(learned, plate)], learned_cams
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("pairs", nargs="+")
+    ap.add_argument("--wrist", action="store_true", help="add two angles per hand to the model")
+    ap.add_argument("--masks", choices=("true", "learned", "plate", "learned-and-plate"), default="true")
+    ap.add_argument("--frames", default="0,10,20,29,39")
+    ap.add_argument("--threshold", type=float, default=0.5, help="the learned masks' person probability")
+    args = ap.parse_args(argv)
+    import bpy
+
+    from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
+    from markerless_mocap.core.calibration_check import mask_mismatch
+    from markerless_mocap.core.capture.capture import load_capture
+    from markerless_mocap.core.keypoints import rig_keypoints
+    from markerless_mocap.core.proportions import Proportions
+    from markerless_mocap.core.proportions_fit import targets_from_landmarks
+    from markerless_mocap.core.tracking import Tracker, TrackingSettings
+
+    frames = [int(f) for f in args.frames.split(",")]
+    errors = []
+    for pair in args.pairs:
+        result, scene = (Path(p) for p in pair.split(":"))
+        bpy.ops.wm.open_mainfile(filepath=str(scene / "subject.blend"))
+        body = body_from_blender(find_armature(bpy.context.scene), None, bpy.context.scene)
+        actor = json.loads((result / "actor.json").read_text())
+        calibrated = Proportions(actor["factors"], actor["overall"])
+        truth = json.loads((scene / "scene_info.json").read_text())["actor"]["proportions"]
+        wanted = np.log(Proportions(truth["factors"], truth["overall"]).factor("forearm")
+                        / calibrated.factor("forearm"))
+        with np.load(result / "poses.npz") as z:
+            rows = [list(z["frames"]).index(f) for f in frames]
+            poses = z["poses"][rows]
+        with np.load(result / "keypoints.npz") as z:
+            rig = rig_keypoints(body)
+            keypoints = [targets_from_landmarks(z["uv"][i], z["visibility"][i], rig) for i in rows]
+        capture = load_capture(scene)
+        try:
+            tracker = Tracker(body, capture, TrackingSettings(backend="fast"))
+            masks, cams = scene_masks(args.masks, scene, tracker, frames, poses, args.threshold)
+            scale = cams[0].width / capture.cameras[0].width
+            model = body
+            if args.wrist:
+                model, n_extra = with_wrist(body)
+                poses = np.concatenate([poses, np.zeros((len(poses), n_extra))], axis=1)
+            candidates = [Proportions({k: (v * np.exp(s) if k.endswith("forearm") else v)
+                                       for k, v in calibrated.factors.items()}, calibrated.overall) for s in STEPS]
+            costs = mask_mismatch(model, tracker.proxy, cams, masks, [(c, poses) for c in candidates],
+                                  [k.scaled(scale) for k in keypoints], scale / tracker.scale, "fast")
+        finally:
+            capture.close()
+        best = STEPS[int(np.argmin(costs))]
+        errors.append(100 * (best - wanted))
+        print(f"{scene.name}: " + " ".join(f"{s:+.2f}:{c:.4f}" for s, c in zip(STEPS, costs))
+              + f" | least at {best:+.2f}, the truth at {wanted:+.3f}: {errors[-1]:+.1f} %", flush=True)
+    print(f"{args.masks} masks, {'with' if args.wrist else 'without'} the wrist: within 3 % on "
+          f"{sum(abs(e) <= 3 for e in errors)} of {len(errors)}")
+
+
+if __name__ == "__main__":
+    main()
