@@ -87,8 +87,9 @@ def _measured_length(segment):
     label, where = next((label, where) for key, label, where in MEASURED_SEGMENTS if key == segment)
     # no tight max: a typo (24.5 for 0.245) must reach the range check and be named, not clamped to look valid
     return FloatProperty(name=f"Measured {label}", default=0.0, min=0.0, max=1000.0, soft_max=1.2, precision=3,
-                         subtype="DISTANCE", unit="LENGTH", description=f"The actor's {label.lower()} ({where}) if you have measured "
-                         "it: the calibrated body gets exactly this length (0: as the footage gives it)")
+                         subtype="DISTANCE", unit="LENGTH",
+                         description=f"The actor's {label.lower()} ({where}) if you have measured it: the "
+                                     "calibrated body gets exactly this length (0: as the footage gives it)")
 
 
 def _is_armature(_self, obj):
@@ -116,8 +117,9 @@ class MocapSettings(bpy.types.PropertyGroup):
                                   description="Fit the actor's proportions on this many frames from the start of "
                                               "the tracked range")
     actor_height: FloatProperty(name="Measured Height", default=0.0, min=0.0, max=3.0, precision=3,
-                                subtype="DISTANCE", unit="LENGTH", description="The actor's height if you have measured it: the "
-                                "calibrated body is scaled to it (0: as the footage gives it)")
+                                subtype="DISTANCE", unit="LENGTH",
+                                description="The actor's height if you have measured it: the calibrated body is "
+                                            "scaled to it (0: as the footage gives it)")
     # the footage reads some lengths only within 5-10 % (README, "Actor calibration"); a tape measure's win
     actor_spine: _measured_length("spine")
     actor_neck: _measured_length("neck")
