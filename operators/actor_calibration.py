@@ -162,6 +162,8 @@ class CalibrationJob(WorkerJob):
 
 def describe(fit):
     """The fitted height and segment lengths, one line each (for the terminal and the panel)."""
+    from ..core.measured_lengths import FOOTAGE_MISS_PERCENT
+
     L, S = fit.lengths, fit.subject_lengths
     measured = fit.measured or {}
     lines = [f"height {L['height']:.3f} m (rig {S['height']:.3f} m)"
@@ -170,7 +172,7 @@ def describe(fit):
     for seg in ("spine", "neck", "shoulder_width", "hip_width", "upper_arm", "forearm", "thigh", "shin", "foot"):
         for key in ([f"l_{seg}", f"r_{seg}"] if sided and f"l_{seg}" in L else [seg]):
             lines.append(f"{key.replace('_', ' ')} {L[key] * 100:.1f} cm (rig {S[key] * 100:.1f} cm, "
-                         f"x{L[key] / S[key]:.3f}){' as measured' if seg in measured else ''}")
+                         f"x{L[key] / S[key]:.3f}){_how_known(seg, measured, FOOTAGE_MISS_PERCENT)}")
     lines.append(f"landmark residual {fit.rms_before * 1000:.1f} mm with the rig -> {fit.rms_after * 1000:.1f} mm "
                  f"calibrated, {len(fit.frames)} frames")
     if fit.silhouettes:
@@ -194,6 +196,15 @@ def describe(fit):
             if check["chosen"] == "halfway":
                 lines += _searched_by_masks(check)
     return lines
+
+
+def _how_known(segment, measured, miss_percent):
+    """' as measured', or how far the footage may miss a segment it reads less well than the rest."""
+    if segment in measured:
+        return " as measured"
+    if segment in miss_percent:
+        return f" (the footage reads it to ±{miss_percent[segment]:.0f} %)"
+    return ""
 
 
 def _searched_by_masks(check):
