@@ -17,8 +17,9 @@ MEASURABLE = ("height",) + SEGMENTS
 HEIGHT_RANGE_M = (0.5, 2.5)     # as the rig check's "a person" (0.5-3 m), a little tighter
 SEGMENT_RANGE_M = (0.02, 1.2)   # a foot's or a neck's few centimetres to a long spine
 # How far the footage's calibration misses a segment: the RMS of calibrated / true - 1, per cent, over the seven
-# actor scenes (seed 0; README, "Actor calibration"), for those past the 3 % the other segments and the height
-# keep. The summary names them, so a user knows which lengths are worth a tape measure.
+# actor scenes (seed 0; README, "Actor calibration"; tools/calibration_accuracy.py prints it), for those past the
+# 3 % the other segments and the height keep. The summary names them, so a user knows which lengths are worth a
+# tape measure.
 FOOTAGE_MISS_PERCENT = {"neck": 6.0, "forearm": 5.3, "shoulder_width": 4.5, "hip_width": 3.5}
 
 

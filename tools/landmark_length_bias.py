@@ -54,7 +54,7 @@ def main(argv=None):
         with np.load(result / "poses.npz") as z:
             poses = z["poses"][:args.frames]
         fit = fit_proportions(body, read_calibration(scene), uv, vis, poses, frames=frames)
-        true = _true_lengths(scene, fit.subject_lengths)
+        true = true_lengths(scene, fit.subject_lengths)
         r = {s: fit.lengths[s] / true[s] for s in SEGMENTS}
         ratios.append(r)
         print(scene.name, "landmarks  ", " ".join(f"{s} {v:.3f}" for s, v in r.items()))
@@ -74,7 +74,7 @@ def main(argv=None):
     return 0
 
 
-def _true_lengths(scene, subject_lengths):
+def true_lengths(scene, subject_lengths):
     """The actor's segment lengths: scene_info.json's when the scene was rendered with another body, else the
     subject's own."""
     info = scene / "scene_info.json"
