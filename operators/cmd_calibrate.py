@@ -2,6 +2,7 @@
 import sys
 from pathlib import Path
 
+from ..core.measured_lengths import MEASURABLE
 from .cmd_track import StepPrinter, add_tracking_options, open_subject, parse_frames, settings_from_args
 
 
@@ -19,8 +20,8 @@ def add_arguments(p):
                    help="fit to the learned landmarks alone (default: then refine the forearm and hip width against "
                         "the person masks of the same frames)")
     p.add_argument("--measured", action="append", metavar="SEGMENT=METRES",
-                   help="a length measured on the actor, used in place of the footage's: height, spine, neck, "
-                        "shoulder_width, upper_arm, forearm, hip_width, thigh, shin or foot (repeat for several)")
+                   help=f"a length measured on the actor, used in place of the footage's: one of "
+                        f"{', '.join(MEASURABLE)} (repeat for several)")
     add_tracking_options(p)
 
 
