@@ -227,6 +227,44 @@ SCENES = {
                    proportions=dict(overall=0.94, factors={"forearm": 0.94 * 1.09, "upper_arm": 0.94 * 0.96,
                                                            "hip_width": 0.94 * 0.96, "shin": 0.94 * 1.03}),
                    subject_from="playground"),
+    # issue 15, held out (made in session 25 before anything was measured on it): the first actor build in an
+    # uncontrolled room (no plates, busy's clutter and changing light, a second person behind, sensor noise and
+    # blur), where users' footage is. 4 % taller overall than the subject, with (relative to that) upper arms 6 %
+    # longer, forearms 5 % shorter, shoulders 5 % narrower, a 6 % longer neck, thighs 4 % shorter, shins 3 % longer,
+    # feet 5 % shorter; 01_01 just before playground's stretch (source frames 530-569: the end of a turn,
+    # facing as playground's subject does) with its own gestures, playground's subject.blend unchanged, EasyMocap calibration, four cameras of its own.
+    "actor9": dict(bvh="01_01.bvh", start=530, n_frames=40, seed=9090, uncontrolled=True, calibration="easymocap",
+                   busy=True, noise=6.0, blur=0.7,
+                   cameras=[
+                       (-80, 3.7, 1.55, 530, (3.5, -2.5), 0.8),
+                       (-35, 3.5, 1.80, 550, (-4.0, 4.5), -1.0),
+                       (12, 3.9, 1.40, 515, (5.0, 3.0), 0.5),
+                       (58, 3.6, 1.65, 565, (-2.5, -5.0), -0.7)],
+                   second=dict(bvh="01_01.bvh", start=640, offset_m=1.8,
+                               colours={"shirt": (0.22, 0.2, 0.05), "trousers": (0.08, 0.1, 0.16),
+                                        "hair": (0.1, 0.08, 0.05)}),
+                   colours={"shirt": (0.1, 0.13, 0.09), "trousers": (0.05, 0.05, 0.06)},
+                   gestures=[(5, 6, 7, 5, {"Right": "face"}),
+                             (24, 5, 6, 4, {"Left": "shoulder", "Right": "overhead"})],
+                   proportions=dict(overall=1.04, factors={"upper_arm": 1.04 * 1.06, "forearm": 1.04 * 0.95,
+                                                           "shoulder_width": 1.04 * 0.95, "neck": 1.04 * 1.06,
+                                                           "thigh": 1.04 * 0.96, "shin": 1.04 * 1.03,
+                                                           "foot": 1.04 * 0.95}),
+                   subject_from="playground"),
+    # issue 15, held out (made in session 25 with actor9, before anything was measured on it): a studio build of
+    # its own, 4 % shorter overall than the subject, with (relative to that) shoulders 6 % wider, upper arms 4 %
+    # longer, forearms 4 % shorter, a 3 % shorter spine, thighs 3 % longer, feet 6 % longer; 01_01 between actor5's
+    # and actor7's stretches (source frames 185-224), playground's subject.blend unchanged, plates.
+    "actor10": dict(bvh="01_01.bvh", start=185, n_frames=40, seed=10100, uncontrolled=False, calibration="toml",
+                    cameras=[
+                        (30, 3.6, 1.70, 540, (-3.5, -3.0), 0.6),
+                        (115, 3.8, 1.45, 520, (4.0, 5.0), -0.9),
+                        (205, 3.5, 1.60, 560, (-5.0, 2.5), 1.2),
+                        (285, 3.9, 1.85, 530, (2.5, -4.5), -0.5)],
+                    proportions=dict(overall=0.96, factors={"shoulder_width": 0.96 * 1.06, "upper_arm": 0.96 * 1.04,
+                                                            "forearm": 0.96 * 0.96, "spine": 0.96 * 0.97,
+                                                            "thigh": 0.96 * 1.03, "foot": 0.96 * 1.06}),
+                    subject_from="playground"),
 }
 MASK_FRAMES = 5
 

@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 9))]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 11))]
 
 
 def scene_dir(name):
@@ -397,6 +397,41 @@ def test_actor8_has_long_forearms_on_a_smaller_body():
     names, _, P = load_gt(d)
     forearm = np.linalg.norm(P[:, names.index("LeftHand")] - P[:, names.index("LeftForeArm")], axis=1)
     np.testing.assert_allclose(forearm, true["l_forearm"], atol=1e-4)
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
+
+
+def test_actor9_is_a_build_of_its_own_in_an_uncontrolled_room():
+    """The eighth held-out actor, the first in users' conditions: 4 % taller than playground's subject, longer
+    upper arms on shorter forearms, narrower shoulders, a longer neck, shorter thighs on longer shins, shorter
+    feet; no plates, a second person and light changing several-fold; a hand at the face and one overhead."""
+    d = scene_dir("actor9")
+    true, ratio = _actor_lengths(d)
+    for seg, relative in (("upper_arm", 1.06), ("forearm", 0.95), ("neck", 1.06), ("thigh", 0.96), ("shin", 1.03),
+                          ("foot", 0.95), ("spine", 1.0)):
+        assert ratio[seg] == pytest.approx(1.04 * relative, rel=1e-6), seg
+    assert ratio["shoulder_width"] < 1.04 * 0.97  # widths: joint to joint
+    assert not (d / "background").exists()
+    names, _, P = load_gt(d)
+    idx = {n: k for k, n in enumerate(names)}
+    at_face = int((np.linalg.norm(P[:, idx["RightHand"]] - P[:, idx["Head"]], axis=1) < 0.15).sum())
+    overhead = int((P[:, idx["RightHand"], 2] > P[:, idx["Head"], 2] + 0.1).sum())
+    assert at_face >= 4 and overhead >= 4, (at_face, overhead)
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
+    assert_second_person_in_every_view_and_changing_light("actor9", "cam1")
+
+
+def test_actor10_is_a_studio_build_with_wide_shoulders_and_long_feet():
+    """The ninth held-out actor: 4 % shorter than playground's subject, shoulders wider, upper arms longer and
+    forearms shorter, a shorter spine, longer thighs and feet; plates."""
+    d = scene_dir("actor10")
+    true, ratio = _actor_lengths(d)
+    for seg, relative in (("upper_arm", 1.04), ("forearm", 0.96), ("spine", 0.97), ("thigh", 1.03), ("foot", 1.06),
+                          ("shin", 1.0), ("neck", 1.0)):
+        assert ratio[seg] == pytest.approx(0.96 * relative, rel=1e-6), seg
+    assert ratio["shoulder_width"] > 0.96 * 1.04
+    names, _, P = load_gt(d)
+    forearm = np.linalg.norm(P[:, names.index("RightHand")] - P[:, names.index("RightForeArm")], axis=1)
+    np.testing.assert_allclose(forearm, true["r_forearm"], atol=1e-4)
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
