@@ -71,7 +71,8 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     assert any(line.startswith("forearm ") and "x1.012" in line for line in lines)
     # the lengths the footage reads least well say so (worth a tape measure), the others do not
     assert any(line.startswith("neck ") and line.endswith("(the footage reads it to ±6 %)") for line in lines)
-    assert [line for line in lines if "the footage reads it" in line and line.startswith(("thigh", "spine"))] == []
+    assert [line for line in lines if "the footage reads it" in line and line.startswith(("upper arm", "shin"))] == []
+    assert any(line.startswith("spine ") and line.endswith("(the footage reads it to ±4 %)") for line in lines)
     # the panel shows them, with the copy button
     props.subject_checked, props.subject_dofs = True, 30
     from test_addon_ui import _draw_all

@@ -6,7 +6,7 @@ this after a change to the calibration and update that table and the README's ("
     .venv/bin/python tools/calibration_accuracy.py ACTOR_JSON:SCENE [ACTOR_JSON:SCENE ...]
 
 ACTOR_JSON: the actor.json of `calibrate` or `track --calibrate` on SCENE, a sample scene whose scene_info.json has
-the actor's true lengths (actor, actor2 ... actor8; a scene without them counts its subject's own lengths).
+the actor's true lengths (actor, actor2 ... actor10; a scene without them counts its subject's own lengths).
 """
 import argparse
 import json
