@@ -7,15 +7,16 @@ print the least mismatch's height against the truth (README, "Actor calibration"
 
 SCENE: a capture folder with subject.blend; the truth is scene_info.json > actor (or, without one, the subject's
 own height). Measured (session 25, seed 0): within 1.4 % of the true height on all 15 rendered scenes with one,
-where the landmark fit's height was 3.9 % short on actor9 and 2.9 % on lobby. A search like this before the
+where the landmark fit's height was 4.0 % short on actor9 and 2.9 % on lobby. A search like this before the
 trunk/leg split, in the calibration itself, got the heights right but tracked worse (README): not shipped.
 """
 import argparse
-import json
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from landmark_length_bias import true_lengths
 
 STEP, REACH = 0.02, 4  # log-change between grid points, grid points each side: +-8 %
 
@@ -25,13 +26,6 @@ def taller(proportions, s):
     from markerless_mocap.core.proportions import Proportions
 
     return Proportions({k: float(v * np.exp(s)) for k, v in proportions.factors.items()}, proportions.overall)
-
-
-def true_height(scene, subject_lengths):
-    info_file = scene / "scene_info.json"
-    info = json.loads(info_file.read_text()) if info_file.is_file() else {}
-    actor = info.get("actor")
-    return actor["true_segment_lengths_m"]["height"] if actor else subject_lengths["height"]
 
 
 def scan(scene, out):
@@ -52,7 +46,7 @@ def scan(scene, out):
                                        [(b, rig_poses) for b in bodies], targets.keypoints,
                                        targets.resolution(tracker), tracker.settings.backend)
         s, table = search_line(body, taller, mismatch, STEP, REACH)
-        truth = true_height(scene, fit.subject_lengths)
+        truth = true_lengths(scene, fit.subject_lengths)["height"]
         height = segment_lengths(scaled_body(subject, taller(body, s)))["height"]
         where = f"at s {s:+.3f}: {100 * (height / truth - 1):+.1f} %" if pinned_down(table) else "at the grid's end"
         found.append(f"{scene.name}: landmark fit {100 * (fit.lengths['height'] / truth - 1):+.1f} %, the masks' "
