@@ -265,6 +265,51 @@ SCENES = {
                                                             "forearm": 0.96 * 0.96, "spine": 0.96 * 0.97,
                                                             "thigh": 0.96 * 1.03, "foot": 0.96 * 1.06}),
                     subject_from="playground"),
+    # issue 15, held out (made in session 26 before anything was measured on them): two more actor builds in
+    # uncontrolled rooms like actor9's (no plates, busy's kind of clutter and changing light, a second person
+    # behind, sensor noise and blur), to judge rules for such rooms on captures they were not read off.
+    # actor11: 3 % shorter overall than the subject, with (relative to that) a 5 % longer spine, hips 6 % and
+    # shoulders 3 % wider, thighs 5 % and neck 5 % shorter, forearms 4 % longer; 01_01 after dusk's stretch
+    # (source frames 332-371, facing back the way lobby's subject faces), gestures of its own, a camera layout of
+    # its own, calibration.toml; lobby's subject.blend unchanged (playground's faces the other way here).
+    "actor11": dict(bvh="01_01.bvh", start=332, n_frames=40, seed=11110, uncontrolled=True, calibration="toml",
+                    busy=True, noise=6.5, blur=0.7,
+                    cameras=[
+                        (-72, 3.8, 1.60, 525, (-4.0, 3.0), 0.9),
+                        (-28, 3.5, 1.40, 505, (5.5, -4.0), -0.6),
+                        (18, 3.9, 1.85, 570, (-2.5, 5.5), 1.1),
+                        (64, 3.6, 1.50, 535, (4.5, -2.0), -1.2)],
+                    second=dict(bvh="01_01.bvh", start=0, offset_m=1.8,
+                                colours={"shirt": (0.3, 0.05, 0.07), "trousers": (0.1, 0.09, 0.08),
+                                         "hair": (0.03, 0.025, 0.02)}),
+                    colours={"shirt": (0.08, 0.09, 0.12), "trousers": (0.06, 0.055, 0.05)},
+                    gestures=[(3, 5, 7, 5, {"Left": "face"}),
+                              (22, 6, 6, 4, {"Right": "overhead", "Left": "belly"})],
+                    proportions=dict(overall=0.97, factors={"spine": 0.97 * 1.05, "hip_width": 0.97 * 1.06,
+                                                            "shoulder_width": 0.97 * 1.03, "thigh": 0.97 * 0.95,
+                                                            "neck": 0.97 * 0.95, "forearm": 0.97 * 1.04}),
+                    subject_from="lobby"),
+    # actor12: 6 % taller overall than the subject, with (relative to that) hips 5 % narrower, shoulders 4 % wider,
+    # upper arms 3 % shorter, shins 4 % and feet 4 % longer, a 2 % shorter spine; 01_01 right after actor11's
+    # stretch (source frames 372-411, which dusk's second person walks), both arms crossed then a hand on the
+    # shoulder, EasyMocap calibration, a second person walking 131_01, lobby's subject.blend unchanged.
+    "actor12": dict(bvh="01_01.bvh", start=372, n_frames=40, seed=12120, uncontrolled=True, calibration="easymocap",
+                    busy=True, noise=7.0, blur=0.8,
+                    cameras=[
+                        (-85, 3.6, 1.75, 550, (3.0, 4.5), -0.8),
+                        (-40, 4.0, 1.35, 575, (-5.0, -3.5), 1.3),
+                        (5, 3.5, 1.65, 500, (6.0, 2.0), -0.3),
+                        (50, 3.8, 1.90, 545, (-3.5, -5.5), 0.7)],
+                    second=dict(bvh="131_01.bvh", start=100, offset_m=1.9,
+                                colours={"shirt": (0.2, 0.2, 0.22), "trousers": (0.03, 0.05, 0.12),
+                                         "hair": (0.25, 0.2, 0.1)}),
+                    colours={"shirt": (0.14, 0.1, 0.08), "trousers": (0.05, 0.06, 0.05)},
+                    gestures=[(6, 5, 8, 5, {"Left": "cross", "Right": "cross"}),
+                              (28, 4, 5, 3, {"Left": "shoulder"})],
+                    proportions=dict(overall=1.06, factors={"hip_width": 1.06 * 0.95, "shoulder_width": 1.06 * 1.04,
+                                                            "upper_arm": 1.06 * 0.97, "shin": 1.06 * 1.04,
+                                                            "foot": 1.06 * 1.04, "spine": 1.06 * 0.98}),
+                    subject_from="lobby"),
 }
 MASK_FRAMES = 5
 

@@ -15,7 +15,7 @@ from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blende
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
-SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 11))]
+SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 13))]
 
 
 def scene_dir(name):
@@ -433,6 +433,49 @@ def test_actor10_is_a_studio_build_with_wide_shoulders_and_long_feet():
     forearm = np.linalg.norm(P[:, names.index("RightHand")] - P[:, names.index("RightForeArm")], axis=1)
     np.testing.assert_allclose(forearm, true["r_forearm"], atol=1e-4)
     assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "playground" / "subject.blend").read_bytes()
+
+def test_actor11_is_a_long_trunk_on_short_thighs_in_an_uncontrolled_room():
+    """The tenth held-out actor, the second in an uncontrolled room: 3 % shorter than the subject, a longer spine
+    on shorter thighs, wider hips and shoulders, a shorter neck, longer forearms; a hand at the face, the other
+    overhead; lobby's subject.blend (facing the way this clip does), a second person, changing light."""
+    d = scene_dir("actor11")
+    true, ratio = _actor_lengths(d)
+    for seg, relative in (("spine", 1.05), ("thigh", 0.95), ("neck", 0.95), ("forearm", 1.04), ("upper_arm", 1.0),
+                          ("shin", 1.0), ("foot", 1.0)):
+        assert ratio[seg] == pytest.approx(0.97 * relative, rel=1e-6), seg
+    assert ratio["hip_width"] > 0.97 * 1.04 and ratio["shoulder_width"] > 0.97 * 1.01  # widths: joint to joint
+    assert not (d / "background").exists()
+    names, _, P = load_gt(d)
+    idx = {n: k for k, n in enumerate(names)}
+    at_face = int((np.linalg.norm(P[:, idx["LeftHand"]] - P[:, idx["Head"]], axis=1) < 0.15).sum())
+    overhead = int((P[:, idx["RightHand"], 2] > P[:, idx["Head"], 2] + 0.1).sum())
+    assert at_face >= 4 and overhead >= 4, (at_face, overhead)
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "lobby" / "subject.blend").read_bytes()
+    assert_second_person_in_every_view_and_changing_light("actor11", "cam1")
+
+
+def test_actor12_is_tall_with_narrow_hips_in_an_uncontrolled_room():
+    """The eleventh held-out actor, the third in an uncontrolled room: 6 % taller than the subject, narrower hips,
+    wider shoulders, shorter upper arms, longer shins and feet, a slightly shorter spine; both arms crossed, then
+    a hand on the other shoulder, while jumping; lobby's subject.blend, a second person, changing light."""
+    d = scene_dir("actor12")
+    true, ratio = _actor_lengths(d)
+    for seg, relative in (("upper_arm", 0.97), ("shin", 1.04), ("foot", 1.04), ("spine", 0.98), ("forearm", 1.0),
+                          ("thigh", 1.0), ("neck", 1.0)):
+        assert ratio[seg] == pytest.approx(1.06 * relative, rel=1e-6), seg
+    assert ratio["hip_width"] < 1.06 * 0.97 and ratio["shoulder_width"] > 1.06 * 1.02
+    names, _, P = load_gt(d)
+    idx, up, lat, fwd = _body_frame(names, P)
+    both_crossed = np.ones(len(P), bool)
+    for side, sign in (("Left", 1.0), ("Right", -1.0)):
+        rel = P[:, idx[f"{side}Hand"]] - P[:, idx["Hips"]]
+        both_crossed &= (sign * (rel * lat).sum(axis=1) < 0) & ((rel * fwd).sum(axis=1) > 0.05)
+    on_shoulder = int((np.linalg.norm(P[:, idx["LeftHand"]] - P[:, idx["RightArm"]], axis=1) < 0.15).sum())
+    assert both_crossed.sum() >= 6 and on_shoulder >= 4, (both_crossed.sum(), on_shoulder)
+    assert np.ptp(P[:, idx["Hips"], 2]) > 0.3  # jumps
+    assert (d / "subject.blend").read_bytes() == (SCENES_ROOT / "lobby" / "subject.blend").read_bytes()
+    assert_second_person_in_every_view_and_changing_light("actor12", "cam1")
+
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
 def test_pose2sim_demo_loads_with_one_warning_per_padded_camera():
