@@ -92,7 +92,8 @@ def _chosen_body(fit, session, targets, rig_poses, log):
 
 
 _CHOICE = {"rig": "kept the rig's proportions",
-           "halfway": "took each segment halfway between the fit and the rig scaled to the fitted height"}
+           "halfway": "took each segment halfway between the fit and the rig scaled to the fitted height",
+           "uniform": "took the rig scaled uniformly to the height the person masks read"}
 
 
 def _mismatches(mismatch):
@@ -195,6 +196,7 @@ def describe(fit):
                          f"({_mismatches(check['mismatch'])}; fitted height {fitted:.3f} m)")
             if check["chosen"] == "halfway":
                 lines += _searched_by_masks(check)
+            lines += _height_by_masks(check)
     return lines
 
 
@@ -225,6 +227,24 @@ def _searched_by_masks(check):
     elif hips:
         lines.append(f"hip width set by the person masks: {_percent(hips['log_change'])} against halfway")
     return lines
+
+
+def _height_by_masks(check):
+    """The line on where the person masks put the height (core/height_by_masks.py), if they were asked."""
+    from ..core.height_by_masks import GATE
+    from ..core.mask_line_search import pinned_down
+
+    height = check.get("height")
+    if not height:
+        return []
+    if height["taken"]:
+        return [f"height read by the person masks: {height['masks_height_m']:.3f} m, the landmarks' "
+                f"{height['landmark_height_m']:.3f} m (more than {100 * GATE:.0f} % apart), so the rig scaled "
+                "to it stood in for the landmarks' proportions"]
+    if not pinned_down(height["grid"]):
+        return ["height from the landmarks: the person masks do not pin it down here"]
+    return [f"height from the landmarks: the person masks put it at {height['masks_height_m']:.3f} m, within "
+            f"{100 * GATE:.0f} %"]
 
 
 def _percent(log_change):

@@ -179,9 +179,11 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     refined = actor["silhouettes"]
     assert refined["segments"] == ["forearm", "hip_width"]
     assert refined["mask_mismatch"]["refined"] <= refined["mask_mismatch"]["landmark_fit"]
-    # ... then the masks chose between the rig and the fit's segments taken halfway
+    # ... then the masks chose between the rig and the fit's segments taken halfway (or, where they read the height
+    # more than 3 % off the landmarks', the rig scaled to their height)
     check = refined["body_check"]
-    assert list(check["mismatch"]) == ["rig", "halfway"]
+    assert len(check["height"]["grid"]) == 13
+    assert list(check["mismatch"]) == ["rig", "uniform" if check["height"]["taken"] else "halfway"]
     assert check["chosen"] == min(check["mismatch"], key=check["mismatch"].get)
     fitted = check["fitted_factors"]
     assert {k for k, v in fitted.items() if v != refined["landmark_factors"][k]} <= {"forearm", "hip_width"}
@@ -243,3 +245,21 @@ def test_the_summary_says_what_the_masks_set_and_what_they_did_not():
     assert lines == ["spine and thigh split as the uniform scale has them: the person masks do not pin the split "
                      "down here", "hip width set by the person masks: +4.2 % against halfway"]
     assert _searched_by_masks({}) == []  # a calibration saved before these searches
+
+
+def test_the_summary_says_where_the_masks_put_the_height():
+    """The height line: taken (the masks and the landmarks more than 3 % apart, so the rig scaled to the masks'
+    height was compared), within the gate, or not pinned down; nothing for a calibration saved before it."""
+    from markerless_mocap.operators.actor_calibration import _height_by_masks
+
+    inside = {"-0.02": 0.20, "0.0": 0.10, "0.02": 0.15}
+    at_end = {"-0.02": 0.30, "0.0": 0.20, "0.02": 0.10}
+    taken = {"grid": inside, "landmark_height_m": 1.667, "masks_height_m": 1.741, "taken": True}
+    assert _height_by_masks({"height": taken}) == [
+        "height read by the person masks: 1.741 m, the landmarks' 1.667 m (more than 3 % apart), so the rig scaled "
+        "to it stood in for the landmarks' proportions"]
+    assert _height_by_masks({"height": {**taken, "masks_height_m": 1.676, "taken": False}}) == [
+        "height from the landmarks: the person masks put it at 1.676 m, within 3 %"]
+    assert _height_by_masks({"height": {**taken, "grid": at_end, "taken": False}}) == [
+        "height from the landmarks: the person masks do not pin it down here"]
+    assert _height_by_masks({}) == []

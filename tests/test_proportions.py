@@ -196,7 +196,8 @@ def test_the_masks_choose_between_the_rig_and_the_halfway_body(walk):
     pushed off by a few degrees: masks of the rig itself rank the rig above a body 8 % larger; masks of an actor
     8 % smaller rank that body above the rig. The halfway body takes each segment's deviation from the uniform
     scale to the fitted height halfway; keep_chosen gives the chosen body and keeps the fit on record."""
-    from markerless_mocap.core.calibration_check import BodyComparison, candidate_bodies, keep_chosen, mask_mismatch
+    from markerless_mocap.core.calibration_check import (BodyComparison, candidate_bodies, keep_chosen, mask_mismatch,
+                                                         uniform_body)
     from markerless_mocap.core.proportions_fit import ProportionsFit
     from markerless_mocap.core.proxy import make_proxy
 
@@ -231,6 +232,13 @@ def test_the_masks_choose_between_the_rig_and_the_halfway_body(walk):
     assert halfway.lengths["spine"] == pytest.approx(segment_lengths(scaled_body(body, bodies["halfway"]))["spine"])
     assert lengths["spine"] > halfway.lengths["spine"] > segment_lengths(body)["spine"] * scale
     assert halfway.lengths["height"] == pytest.approx(lengths["height"], rel=0.01)
+    # where the masks read the height otherwise than the landmarks, the rig scaled to the masks' height competes
+    uniform = uniform_body(fit, 1.80)
+    assert uniform.factors.keys() == fitted.factors.keys() and uniform.overall == pytest.approx(
+        1.80 / segment_lengths(body)["height"])
+    scaled = keep_chosen(fit, body, BodyComparison({"rig": 0.3, "uniform": 0.2}, {**bodies, "uniform": uniform}))
+    assert scaled.silhouettes["body_check"]["chosen"] == "uniform"
+    assert scaled.lengths["height"] == pytest.approx(1.80, rel=1e-6)
 
 
 def test_the_masks_find_the_trunk_leg_split(walk):
@@ -284,6 +292,34 @@ def test_the_masks_find_the_hip_width(walk):
                                                                      [(p, pushed) for p in bodies], backend="fast"))
     assert len(grid) == 9 and min(grid, key=grid.get) < 0
     assert t == pytest.approx(np.log(0.93), abs=0.025), grid
+
+
+def test_the_masks_read_the_height_where_the_landmarks_misread_it(walk):
+    """core/height_by_masks.py: on synthetic masks of an actor whose segments are all 5 % longer, the scan from the
+    rig puts the height within 1.5 % of the actor's and, the two more than 3 % apart, takes it; on masks of the
+    rig itself it stays within the gate and is not taken. taller keeps the head, hands and girth."""
+    from markerless_mocap.core.calibration_check import mask_mismatch
+    from markerless_mocap.core.height_by_masks import height_by_masks, taller
+    from markerless_mocap.core.proxy import make_proxy
+
+    body, poses = walk
+    start = Proportions({k: 1.0 for k in ("spine", "neck", "shoulder_width", "hip_width", "upper_arm", "forearm",
+                                          "thigh", "shin", "foot")}, 1.0)
+    actor = taller(start, np.log(1.05))
+    assert actor.overall == 1.0 and list(actor.factors.values()) == [pytest.approx(1.05)] * 9
+    truth = segment_lengths(scaled_body(body, actor))["height"]
+    cameras = [c.scaled(0.5) for c in read_calibration(scene_dir("walk"))]
+    frames = np.arange(0, 60, 15)
+    pushed = poses[frames] + np.random.default_rng(9).normal(0.0, 0.02, poses[frames].shape)
+    proxy = make_proxy(body, 2000)
+    for masks_of, expected, taken in ((actor, truth, True), (start, segment_lengths(body)["height"], False)):
+        masks = _synthetic_masks(scaled_body(body, masks_of), cameras, poses[frames])
+        found = height_by_masks(body, start, lambda bodies: mask_mismatch(body, proxy, cameras, masks,
+                                                                          [(p, pushed) for p in bodies],
+                                                                          backend="fast"))
+        assert found["landmark_height_m"] == pytest.approx(segment_lengths(body)["height"])
+        assert found["masks_height_m"] == pytest.approx(expected, rel=0.015), found["grid"]
+        assert found["taken"] is taken, found
 
 
 def test_a_line_search_refines_inside_the_grid_and_stops_at_its_end():
