@@ -80,12 +80,13 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
 
 
 def _chosen_body(fit, session, targets, rig_poses, log):
-    """The fit's segments taken halfway (the trunk/leg split and the hip width set by the person masks), or the
-    rig's own proportions where they match the masks better (core/calibration_check.py)."""
+    """The fit's segments taken halfway (the trunk/leg split and the hip width set by the person masks; the rig
+    scaled to the masks' height where the landmarks misread it), or the rig's own proportions where they match the
+    masks better (core/calibration_check.py)."""
     from ..core.calibration_check import compare_bodies, keep_chosen
 
-    log("calibration: the spine/thigh split, the hip width and the choice between the rig and the calibrated body "
-        "(segments halfway), against the person masks")
+    log("calibration: the spine/thigh split, the hip width, the height and the choice between the rig and the "
+        "calibrated body, against the person masks")
     comparison = compare_bodies(fit, session.character, session.tracker, targets, rig_poses)
     log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)})")
     return keep_chosen(fit, session.character, comparison)
