@@ -7,8 +7,8 @@ masks (README, "Actor calibration").
 
 SCENE: a capture folder with subject.blend; the truth is scene_info.json > actor (or, without one, the subject's
 own height). Measured (session 25, seed 0): the masks within 1.4 % of the true height on all 15 rendered scenes
-with one, where the landmark fit's was 4.0 % short on actor9 and 2.9 % on lobby; session 26: actor12 -7.6 % from
-the landmarks, +1.4 % from the masks.
+with one, where the landmark fit's was 4.0 % short on actor9 and 2.9 % on lobby; session 27: actor12 -7.1 % from
+the landmarks' body, +1.1 % from the masks (the gate's line in `calibrate`).
 """
 import argparse
 import json
