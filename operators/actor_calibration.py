@@ -194,7 +194,7 @@ def describe(fit):
         if check:
             fitted = check.get("fitted_lengths_m", L)["height"]
             lines.append(f"{_CHOICE[check['chosen']]}: it matches the person masks best "
-                         f"({_mismatches(check['mismatch'])}; fitted height {fitted:.3f} m)")
+                         f"({_mismatches(check['mismatch'])}; the landmark fit's height {fitted:.3f} m)")
             if check["chosen"] == "halfway":
                 lines += _searched_by_masks(check)
             lines += _height_by_masks(check)
@@ -239,9 +239,10 @@ def _height_by_masks(check):
     if not height:
         return []
     if height["taken"]:
-        return [f"height read by the person masks: {height['masks_height_m']:.3f} m, the landmarks' "
-                f"{height['landmark_height_m']:.3f} m (more than {100 * GATE:.0f} % apart), so the rig scaled "
-                "to it stood in for the landmarks' proportions"]
+        # the height compared is the landmarks' body after the split and hip width, a little off the fit's own
+        return [f"height read by the person masks: {height['masks_height_m']:.3f} m, the landmarks' body's (split "
+                f"and hip width set) {height['landmark_height_m']:.3f} m (more than {100 * GATE:.0f} % apart), so "
+                "the rig scaled to it stood in for the landmarks' proportions"]
     if not pinned_down(height["grid"]):
         return ["height from the landmarks: the person masks do not pin it down here"]
     return [f"height from the landmarks: the person masks put it at {height['masks_height_m']:.3f} m, within "

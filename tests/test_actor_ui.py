@@ -89,7 +89,7 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
     assert "Measured Lengths (1 set)" in labels
     # a long line (the body chosen, the masks' searches) is wrapped onto several labels, not cut off
     choice = ("took each segment halfway between the fit and the rig scaled to the fitted height: it matches the "
-              "person masks best (mask mismatch rig 0.219, halfway 0.153; fitted height 1.539 m)")
+              "person masks best (mask mismatch rig 0.219, halfway 0.153; the landmark fit's height 1.539 m)")
     props.actor_summary += "\n" + choice
     labels = [e[1] for e in _draw_all(bpy) if e[0] == "label"]
     start = next(i for i, t in enumerate(labels) if t.startswith("took each segment"))
@@ -256,8 +256,8 @@ def test_the_summary_says_where_the_masks_put_the_height():
     at_end = {"-0.02": 0.30, "0.0": 0.20, "0.02": 0.10}
     taken = {"grid": inside, "landmark_height_m": 1.667, "masks_height_m": 1.741, "taken": True}
     assert _height_by_masks({"height": taken}) == [
-        "height read by the person masks: 1.741 m, the landmarks' 1.667 m (more than 3 % apart), so the rig scaled "
-        "to it stood in for the landmarks' proportions"]
+        "height read by the person masks: 1.741 m, the landmarks' body's (split and hip width set) 1.667 m (more "
+        "than 3 % apart), so the rig scaled to it stood in for the landmarks' proportions"]
     assert _height_by_masks({"height": {**taken, "masks_height_m": 1.676, "taken": False}}) == [
         "height from the landmarks: the person masks put it at 1.676 m, within 3 %"]
     assert _height_by_masks({"height": {**taken, "grid": at_end, "taken": False}}) == [
