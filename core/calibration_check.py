@@ -4,7 +4,7 @@ its spine / thigh split and hip width read from the masks.
 The landmark fit and the masks' refinement get the actor's height right to a per cent or two, but how that height
 splits into segments only roughly: BlazePose's points carry the proportions it was trained on, so where the hip
 joints sit between the shoulders and the knees is hardly measured (the fitted spine / thigh ratio on eleven
-scenes: 1.00-1.13 of the rig's whatever the truth, 0.92-1.13; README, "Actor calibration"). A short trunk on long legs
+scenes: 1.00-1.13 of the rig's whatever the truth, 0.92-1.13; docs/actor-calibration.md). A short trunk on long legs
 (sample_scenes/actor3) came out as a normal trunk on short legs (spine +9 %, thigh -12 %), and tracking with it
 was worse than with the rig (18.4 -> 21.0 mm). Each segment's deviation from a uniform scale to the fitted height
 is then partly the actor's and partly an error of about the same size, so the body tracked with takes half of it
@@ -88,7 +88,7 @@ def compare_bodies(fit, subject, tracker, targets, rig_poses):
     masks' height stands in for it: in rooms where the landmarks misread the height (clutter, changing light)
     their segments' deviations are no better (actor9's thighs +10 % and hips +12 % with the searches at the
     right height), and on actor9, actor12 and lobby that body tracked better than the halfway one scaled to it
-    (189.9 mm summed over seeds 0 / 1 against 196.6; README, "Actor calibration"). targets: the
+    (189.9 mm summed over seeds 0 / 1 against 196.6; docs/actor-calibration.md). targets: the
     CalibrationTargets of fit.frames (core/proportions_silhouette.calibration_targets, the ones the refinement
     used); rig_poses (F,D): those frames as tracked with the rig, every body's start (so no body starts closer to
     the masks)."""

@@ -5,7 +5,7 @@ The landmark fit reads the height within 1.6 % in a studio but 3-7 % short in cl
 light (lobby, actor9, actor12). The masks read it better: scanning every segment of the calibrated body by a common
 factor (head, hands and the skin's girth kept, since the learned masks run a few per cent fat), with every
 candidate's frames refitted to the masks, put the least mismatch within 1.4 % of the true height on all 15
-rendered scenes with one (README, "Actor calibration"). Taking that height always tracked worse in the studio
+rendered scenes with one (docs/actor-calibration.md). Taking that height always tracked worse in the studio
 (the segments' split no longer matched it), so it is taken only where the two disagree by more than GATE. Then
 the landmarks' proportions are set aside as well and the rig scaled uniformly to the masks' height is the body
 the masks compare with the rig (core/calibration_check.py): over actor9, actor12 (made for this) and lobby,

@@ -1,7 +1,7 @@
 """Lengths measured on the actor (a known height, a tape measure's forearm) in place of what the footage gave.
 
 The calibration reads the height within 2 % in a studio (4 % short in a cluttered room) but some segments only
-within 5-10 % (the forearm, the neck, the shoulder width: README, "Actor calibration"), and a user who has
+within 5-10 % (the forearm, the neck, the shoulder width: docs/actor-calibration.md), and a user who has
 measured the actor knows better. A measured segment sets that segment's factor so the calibrated body has exactly
 that length; a measured height scales the whole body first (every segment, the head, hands and girth alike). The
 other segments keep the calibration's lengths; a measured spine, neck, thigh or shin changes the height
@@ -18,11 +18,12 @@ MEASURABLE = ("height",) + SEGMENTS
 HEIGHT_RANGE_M = (0.5, 2.5)     # as the rig check's "a person" (0.5-3 m), a little tighter
 SEGMENT_RANGE_M = (0.02, 1.2)   # a foot's or a neck's few centimetres to a long spine
 # How far the footage's calibration misses a segment: the RMS of calibrated / true - 1, per cent, over the eleven
-# actor scenes whose body the calibration changed (actor .. actor12 but actor6; `calibrate --seed 0`; README, "Actor
-# calibration"; tools/calibration_accuracy.py prints it), for those past the 3 % the other segments and the height
-# keep. The summary names them, so a user knows which lengths are worth a tape measure. Session 27: where the masks
-# read the height (actor9, actor12) the rig scaled uniformly replaces the landmarks' proportions, which took the
-# spine (actor9 -7.7 %) below 3 % and brought the upper arm (actor9, actor11 -5 %, actor12 +4.7 %) above it.
+# actor scenes whose body the calibration changed (actor .. actor12 but actor6; `calibrate --seed 0`;
+# README, "Actor calibration"; tools/calibration_accuracy.py prints it), for those past the 3 % the other
+# segments and the height keep. The summary names them, so a user knows which lengths are worth a tape measure.
+# Session 27: where the masks read the height (actor9, actor12) the rig scaled uniformly replaces the landmarks'
+# proportions, which took the spine (actor9 -7.7 %) below 3 % and brought the upper arm (actor9, actor11 -5 %,
+# actor12 +4.7 %) above it.
 FOOTAGE_MISS_PERCENT = {"neck": 5.1, "forearm": 5.1, "hip_width": 4.4, "foot": 4.3, "shoulder_width": 4.3,
                         "upper_arm": 3.3, "thigh": 3.0}
 

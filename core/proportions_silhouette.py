@@ -29,13 +29,13 @@ MAX_ROUNDS = 12        # moves per step size
 # The segments the masks refine; the others keep the landmark fit's length. On walk and playground (true
 # factor 1.00) the masks brought these two closer to 1 on average, but narrowed the shoulders and lengthened
 # feet and shins when left free on every segment: a shoe's outline on the floor, or shoulders beside hanging
-# arms, do not measure those lengths (README, "Actor calibration", has the figures).
+# arms, do not measure those lengths (docs/actor-calibration.md has the figures).
 SILHOUETTE_SEGMENTS = ("forearm", "hip_width")
 ROUNDS = 3               # pose refits (ICP on the masks with the current body), each followed by a factor search
 # How far the masks may move a segment from the landmark fit (log factor). The landmarks misstated a segment by
 # up to 9 % on the scenes with known proportions; where the masks' optimum lies at this bound they do not pin
 # the length down (on the real Pose2Sim capture the forearm's mismatch kept falling to x1.37 of the rig), and
-# the segment keeps the landmark fit's length. Set after seeing that capture (README, "Actor calibration").
+# the segment keeps the landmark fit's length. Set after seeing that capture (docs/actor-calibration.md).
 MAX_DEPARTURE = float(np.log(1.12))
 
 

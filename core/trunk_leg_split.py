@@ -1,7 +1,7 @@
 """Where the hip joints sit between the shoulders and the knees, from the person masks.
 
 The landmark fit does not measure it: its spine / thigh ratio came out 1.00-1.13 of the rig's on eleven scenes
-whatever the truth (0.92-1.13; README, "Actor calibration"). The masks do, once every frame's pose is refitted to
+whatever the truth (0.92-1.13; docs/actor-calibration.md). The masks do, once every frame's pose is refitted to
 them for each candidate body: lengthening the spine and shortening the thighs by the same length (the height
 kept) moves the mismatch to a minimum near the truth. Measured from the rig scaled to the fitted height, seed 0,
 the spine's log-change at the masks' minimum against the truth: actor3 -0.06 (-0.04), actor5 -0.03 (-0.02),

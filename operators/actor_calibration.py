@@ -8,7 +8,7 @@ import numpy as np
 from .worker_job import WorkerJob
 
 DEFAULT_FRAMES = 20  # two thirds of a second at 30 fps. On the actor scene 10 frames left the upper arm 8 % long,
-                     # 20 frames 2.5 %, 40 frames 2 % (README, "Actor calibration")
+                     # 20 frames 2.5 %, 40 frames 2 % (docs/actor-calibration.md)
 
 
 def calibration_frames(all_frames, count=DEFAULT_FRAMES):

@@ -1,5 +1,5 @@
 """Scan the forearm's factor against person masks, with or without a wrist in the model, and print where the
-least mismatch lies against the actor's true forearm (README, "Actor calibration", a wrist in the model).
+least mismatch lies against the actor's true forearm (docs/actor-calibration.md, a wrist in the model).
 
 Each candidate body (the calibration's, its forearm scaled by exp(step), steps -12 % to +12 % by 3 %) gets
 its frames refitted to the masks and landmarks by the tracker's local fit from the calibration's poses, then

@@ -1,7 +1,7 @@
 """Where the person masks and the landmarks put the actor's height, against the truth: `calibrate` a scene as
 shipped and read its record of core/height_by_masks.py (actor.json > silhouettes > body_check > height), which
 scans the halfway body's segments by a common factor with every candidate's calibration frames refitted to the
-masks (README, "Actor calibration").
+masks (docs/actor-calibration.md).
 
     .venv/bin/python tools/height_mask_scan.py SCENE [SCENE ...] [--out DIR]
 

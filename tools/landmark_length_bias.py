@@ -5,7 +5,7 @@ scene), and print fitted / true per segment (1.000 = exact), landmarks alone and
 masks.
 Measured (seed 0): the landmark ratios depend on the motion (forearm 0.94 on walk, 1.00 on playground; hip
 width 0.92 / 1.02), so no fixed correction is applied; the masks bring the forearm and hip width within a
-few per cent on both; see README, "Actor calibration".
+few per cent on both; see docs/actor-calibration.md.
 
     .venv/bin/python tools/landmark_length_bias.py RESULT:SCENE [RESULT:SCENE ...] [--frames N]
         [--all-segments | --segments forearm,hip_width,...]

@@ -11,7 +11,7 @@ shoulder and hip offsets spread alike whether the upper arm and thigh or the tru
 and legs swing little); with the arms crossed over the chest (busy) only the trunk keeps them on the landmarks.
 The scenes disagree by up to 0.02 trunk (shoulders: walk -0.050 outwards, playground -0.028), more than the
 median moves with the carrier: BlazePose's placement depends on the footage, which bounds what landmarks can
-measure of a body's widths (README, "Actor calibration").
+measure of a body's widths (docs/actor-calibration.md).
 
     .venv/bin/python tools/landmark_offsets.py sample_scenes/walk sample_scenes/playground [--step 2] [--raw]
 
