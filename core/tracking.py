@@ -614,8 +614,9 @@ class Tracker:
     def _keypoint_proposal(self, feats, estimate, energy, evaluations, off):
         """The limbs whose landmarks disagree with the estimate this frame, fitted to the triangulated
         landmarks and polished by the local fit: kept when that lowers the energy (fast limbs outrun the
-        particles' prediction; the detections do not)."""
-        from .keypoint_fit import fit_to_points, limb_distances_3d, triangulated_landmarks
+        particles' prediction; the detections do not). The fit starts from the estimate and from the limbs at
+        rest (limb_landmark_fit)."""
+        from .keypoint_fit import limb_distances_3d, limb_landmark_fit, triangulated_landmarks
 
         limbs = limb_dofs(self.body.dofs)
         X, ok = triangulated_landmarks(self.capture.cameras, self.energy.keypoints, self.energy.rig_points)
@@ -628,9 +629,7 @@ class Tracker:
         if not off_limbs:
             return estimate, energy, evaluations
         dofs = np.concatenate([limbs[limb] for limb in off_limbs])
-        fitted, _ = fit_to_points(self.body, self.energy.rig_points, self.to_absolute(estimate), X, ok, dofs=dofs,
-                                  max_nfev=30)
-        candidate = self.to_relative(fitted)
+        candidate = self.to_relative(limb_landmark_fit(self.body, rig, self.to_absolute(estimate), X, ok, dofs))
         if self.refines:
             candidate = self._icp_fit(feats, candidate)
         candidate_energy = float(self._energy_fn(candidate[None])[0])
