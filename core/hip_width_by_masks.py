@@ -4,11 +4,12 @@ The landmark fit reads the hip width from BlazePose's hip points, which lie insi
 that changes with the build: their distance over the true joint distance was 0.75-1.03 over nine rendered
 scenes (calibration frames, seed 0). The masks held at the tracked poses moved it a little
 (docs/actor-calibration.md); with every candidate's frames refitted to them, the thighs' outlines set it.
-Scanned from the calibrated body (segments halfway, the trunk/leg split set), log-change at the masks' least mismatch against the
-truth's, seed 0: actor 0.00 (+0.007), actor2 -0.03 (-0.015), actor3 -0.03 (-0.042), actor4 +0.06 (+0.035),
-actor5 -0.06 (-0.050), walk +0.03 (0.00), actor7 +0.12 at the grid's end (+0.079). The same scans of the shoulder
-width (the wider the better on five of seven builds, actor2 -0.03 against +0.097) and of the forearm (the least
-mismatch 5-11 % from the truth on five of seven) do not pin those down, so they stay as calibrated.
+Scanned from the calibrated body (segments halfway, the trunk/leg split set), log-change at the masks' least
+mismatch against the truth's, seed 0: actor 0.00 (+0.007), actor2 -0.03 (-0.015), actor3 -0.03 (-0.042), actor4
++0.06 (+0.035), actor5 -0.06 (-0.050), walk +0.03 (0.00), actor7 +0.12 at the grid's end (+0.079). The same scans
+of the shoulder width (the wider the better on five of seven builds, actor2 -0.03 against +0.097) and of the
+forearm (the least mismatch 5-11 % from the truth on five of seven) do not pin those down, so they stay as
+calibrated.
 """
 from __future__ import annotations
 

@@ -142,13 +142,15 @@ def fit_to_points(body, rig_points, x0, targets, ok, hold=0.02, dofs=None, max_n
 def limb_landmark_fit(body, rig_points, pose, X, ok, dofs):
     """`pose` (absolute) with the DOFs `dofs` fitted to the triangulated landmarks X (K,3) where ok, from two
     starts: the pose itself and those DOFs at rest; the rest's where the landmarks fit it clearly better. From the
-    pose alone the least squares stays near it when the limb has moved far: on actor9 (frames 37-38, seed 0) a
+    pose alone the least squares stays near it when the limb has moved far: on actor9 (frames 37-39, seed 0) a
     right arm tracked raised while the person's hung at the side kept its elbow 0.31-0.34 m from the landmark (rms
     0.05-0.07 m even with 200 evaluations); from rest it came to rms 0.02 m and the energy fell 19.2 -> 14.4."""
+    near, near_rms = fit_to_points(body, rig_points, pose, X, ok, dofs=dofs, max_nfev=30)
+    if near_rms <= REST_START_GAIN:  # no fit can be that much better
+        return near
     at_rest = np.array(pose, float)
     at_rest[dofs] = body.default_pose()[dofs]
-    (near, near_rms), (rested, rested_rms) = (fit_to_points(body, rig_points, start, X, ok, dofs=dofs, max_nfev=30)
-                                              for start in (pose, at_rest))
+    rested, rested_rms = fit_to_points(body, rig_points, at_rest, X, ok, dofs=dofs, max_nfev=30)
     # both starts usually end in the same fit; only a clearly better one replaces the pose's own
     return rested if rested_rms < near_rms - REST_START_GAIN else near
 
