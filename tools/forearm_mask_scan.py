@@ -11,9 +11,13 @@ upper arm and the forearm at a constant arm span (the elbow slides along the arm
 learned masks, calibration frames 0-19 of `calibrate --seed 0`, least mismatch against the truth's forearm share,
 per cent: actor -12.2, actor2 +2.6, actor3 -1.1, actor4 +8.7, actor5 -2.1, actor7 -8.5, actor8 -3.4, actor10 -3.7,
 actor11 -8.0 (3 of 9 within 3 %; the mismatch moves by 0.001-0.003 over the grid).
+With --score edges each candidate's refitted frames are scored by the distance from the arms' outline to the
+image's Canny edges instead of the masks' XOR: session 29, learned masks, frames 0,2,...,18, 3 of 9 within 3 %
+with or without the wrist (docs/actor-calibration.md).
 
     .venv/bin/python tools/forearm_mask_scan.py RESULT:SCENE [RESULT:SCENE ...] [--wrist]
         [--masks true|learned|plate|learned-and-plate] [--frames 0,10,20,29,39] [--threshold 0.5] [--trade]
+        [--score masks|edges]
 
 RESULT: a `track --calibrate` result folder (actor.json, poses.npz, keypoints.npz; or a folder holding a
 `calibrate` run's actor.json and its calibration_frames' poses.npz and keypoints.npz) of SCENE, a capture folder
@@ -28,6 +32,7 @@ import numpy as np
 
 STEPS = np.arange(-4, 5) * 0.03
 WRIST_LIMIT = 1.2  # radians either way: a bent wrist, not a broken one
+EDGE_CAP = 8.0  # pixels: an outline point farther from every image edge counts as this far (--score edges)
 
 
 def with_wrist(body):
@@ -85,6 +90,38 @@ def scene_masks(kind, scene, tracker, frames, poses, threshold):
              for m, p in zip(lf, pf)] for lf, pf in zip(learned, plate)], learned_cams
 
 
+def edge_mismatch(model, proxy, cameras, masks, candidates, keypoints, resolution, images):
+    """Per candidate (Proportions, start poses): its frames refitted as core/calibration_check.mask_mismatch does,
+    then the mean distance in pixels (capped at EDGE_CAP) from the arms' outline where it meets the background to
+    the nearest Canny edge of the image (images: per frame one BGR image per camera, at the cameras' resolution).
+    Sharp where the learned masks are soft: the rendered hand's outline ends on an image edge."""
+    import cv2
+
+    from markerless_mocap.core.proportions_silhouette import refit_poses, scaled_proxy
+    from markerless_mocap.core.render import reference
+
+    edge_distance = [[cv2.distanceTransform((cv2.Canny(cv2.GaussianBlur(cv2.cvtColor(im, cv2.COLOR_BGR2GRAY), (3, 3), 0),
+                                                       40, 120) == 0).astype(np.uint8), cv2.DIST_L2, 3)
+                      for im in frame] for frame in images]
+    arms = [model.part_names.index(f"{side}_elbow") + 1 for side in "lr"]
+    costs = []
+    for proportions, start in candidates:
+        body, scaled = scaled_proxy(model, proxy, proportions)
+        poses = refit_poses(body, scaled, cameras, masks, np.asarray(start, float), keypoints, resolution)
+        label = (np.asarray(scaled.face_part) + 1).astype(np.int16)
+        distances = []
+        for pose, frame_distance in zip(poses, edge_distance):
+            uv, z = reference.project_views(body.deform(pose[None], None, body.vertices, body.weights,
+                                                        body.unweighted), cameras)
+            for c, cam in enumerate(cameras):
+                labels = reference.rasterize(uv[0, c], z[0, c], scaled.faces, label, cam.width, cam.height)
+                beside_background = cv2.dilate((labels == 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+                outline = reference.boundary_mask(labels) & np.isin(labels, arms) & beside_background
+                distances.append(np.minimum(frame_distance[c][outline], EDGE_CAP))
+        costs.append(float(np.concatenate(distances).mean()))
+    return costs
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("pairs", nargs="+")
@@ -95,6 +132,9 @@ def main(argv=None):
     ap.add_argument("--trade", action="store_true",
                     help="trade length between upper arm and forearm at a constant arm span (shoulder to wrist) "
                          "instead of scaling the forearm alone")
+    ap.add_argument("--score", choices=("masks", "edges"), default="masks",
+                    help="each candidate's refitted frames scored by XOR against the masks, or by the distance from "
+                         "the arms' outline to the image's edges")
     args = ap.parse_args(argv)
     import bpy
 
@@ -144,15 +184,24 @@ def main(argv=None):
                 candidates = [Proportions({k: (v * np.exp(s) if k.endswith("forearm") else v)
                                            for k, v in calibrated.factors.items()}, calibrated.overall)
                               for s in STEPS]
-            costs = mask_mismatch(model, tracker.proxy, cams, masks, [(c, poses) for c in candidates],
-                                  [k.scaled(scale) for k in keypoints], scale / tracker.scale, "fast")
+            refit = (model, tracker.proxy, cams, masks, [(c, poses) for c in candidates],
+                     [k.scaled(scale) for k in keypoints], scale / tracker.scale)
+            if args.score == "edges":
+                import cv2
+
+                images = [[cv2.resize(img[c.name], (c.width, c.height), interpolation=cv2.INTER_AREA) for c in cams]
+                          for img in (capture.frames.read(f) for f in frames)]
+                costs = edge_mismatch(*refit, images)
+            else:
+                costs = mask_mismatch(*refit, "fast")
         finally:
             capture.close()
         best = STEPS[int(np.argmin(costs))]
         errors.append(100 * (best - wanted))
         print(f"{scene.name}: " + " ".join(f"{s:+.2f}:{c:.4f}" for s, c in zip(STEPS, costs))
               + f" | least at {best:+.2f}, the truth at {wanted:+.3f}: {errors[-1]:+.1f} %", flush=True)
-    print(f"{args.masks} masks, {'with' if args.wrist else 'without'} the wrist: within 3 % on "
+    print(f"{args.masks} masks{', scored by edges' if args.score == 'edges' else ''}, "
+          f"{'with' if args.wrist else 'without'} the wrist: within 3 % on "
           f"{sum(abs(e) <= 3 for e in errors)} of {len(errors)}")
 
 
