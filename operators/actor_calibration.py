@@ -35,11 +35,29 @@ def open_calibration(scene, armature, capture_dir, out_dir, settings=None, frame
     OUT/calibration_frames/ (default: the take's first DEFAULT_FRAMES)."""
     from .track_session import TrackSession
 
+    if frames is not None:
+        require_enough_frames(list(frames), capture_dir)  # before the session opens the capture or the folder
     session = TrackSession(scene, armature, capture_dir, Path(out_dir) / "calibration_frames", settings,
                            frames=frames, log=log, step=step)
     if frames is None:  # the first frames of the take
         session.all_frames = session.frames = calibration_frames(session.all_frames)
+        try:
+            require_enough_frames(session.frames, capture_dir)  # a take shorter than that
+        except ValueError:
+            session.capture.close()
+            raise
     return session
+
+
+def require_enough_frames(frames, capture_dir):
+    """Too few frames to calibrate on: the user's range (or a very short take), said before anything is tracked."""
+    from ..core.proportions_fit import MIN_FRAMES
+
+    if len(frames) < MIN_FRAMES:
+        given = ("none" if not frames else f"1 (frame {frames[0]})" if len(frames) == 1
+                 else f"{len(frames)} (frames {frames[0]}-{frames[-1]})")
+        raise ValueError(f"the calibration needs at least {MIN_FRAMES} frames; it was given {given} of {capture_dir}: "
+                         f"choose a longer range; {DEFAULT_FRAMES} frames (the default) measure the lengths best")
 
 
 def fit_calibration(session, log=None, progress=None, symmetric=True, silhouettes=True):

@@ -209,8 +209,9 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
 
 
 def test_a_mistyped_measured_length_stops_before_anything_is_tracked(tmp_path):
-    """`calibrate --measured` with an unknown segment or centimetres for metres: exit 2 at once, one line naming
-    the problem and the fix; `track --calibrate-measured` without --calibrate says what it applies to."""
+    """`calibrate --measured` with an unknown segment or centimetres for metres, or `--frames` with fewer frames
+    than the fit needs: exit 2 at once, one line naming the problem and the fix; `track --calibrate-measured`
+    without --calibrate says what it applies to."""
     scene = subject_blend_path().parents[1] / "actor"
     base = [sys.executable, "-m", "markerless_mocap", "calibrate", "--scene", str(scene / "subject.blend"),
             "--capture", str(scene), "--out", str(tmp_path / "c")]
@@ -222,6 +223,12 @@ def test_a_mistyped_measured_length_stops_before_anything_is_tracked(tmp_path):
         last = run.stderr.strip().splitlines()[-1]
         assert last.startswith("markerless_mocap calibrate: --measured") and says in last, last
     assert not (tmp_path / "c").exists()
+    for frames, says in (("0-1", "it was given 2 (frames 0-1) of"), ("7", "it was given 1 (frame 7) of")):
+        run = subprocess.run(base + ["--frames", frames], capture_output=True, text=True, timeout=120)
+        assert run.returncode == 2, frames
+        last = run.stderr.strip().splitlines()[-1]
+        assert "the calibration needs at least 3 frames" in last and says in last and "choose a longer range" in last
+    assert not (tmp_path / "c").exists()  # refused before the session made its folder
     run = subprocess.run([sys.executable, "-m", "markerless_mocap", "track", "--scene", str(scene / "subject.blend"),
                           "--capture", str(scene), "--out", str(tmp_path / "t"), "--actor", str(tmp_path / "a.json"),
                           "--calibrate-measured", "height=1.6"], capture_output=True, text=True, timeout=120)
