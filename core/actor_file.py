@@ -70,6 +70,7 @@ def actor_body(data, body):
 def proportions_for_body(data, body, tolerance=1e-6):
     """The Proportions that give `body` the calibrated actor: the saved factors when `body` is the rig the
     calibration was fitted on (same segment lengths), else factors that reproduce the saved lengths."""
+    same_rig = False
     try:
         own = segment_lengths(body)
         same_rig = all(abs(own[k] - v) <= tolerance * max(1.0, abs(v)) for k, v in data["subject_lengths_m"].items()
@@ -78,4 +79,7 @@ def proportions_for_body(data, body, tolerance=1e-6):
             return Proportions(data["factors"], data["overall"])
         return proportions_for_lengths(body, data["lengths_m"])
     except (KeyError, TypeError, ProportionsError) as exc:
-        raise ActorFileError(f"the actor calibration does not fit this rig ({exc}); calibrate again with this rig")
+        # the rig it was fitted on with factors no person has: the file was edited or damaged, not the wrong rig
+        what = "holds proportions no person has" if same_rig else "does not fit this rig"
+        fix = "" if isinstance(exc, ProportionsError) else "; calibrate again with this rig"
+        raise ActorFileError(f"the actor calibration {what} ({exc}){fix}") from None

@@ -140,6 +140,10 @@ def test_cli_reuses_a_saved_calibration_and_refuses_a_bad_one(subject_with_actor
         actor_file.load_actor(bad)
     with pytest.raises(actor_file.ActorFileError, match="no actor calibration there"):
         actor_file.load_actor(tmp_path / "missing")
+    edited = dict(data, overall=7.0)  # this rig's calibration with a factor no person has: the file, not the rig
+    with pytest.raises(actor_file.ActorFileError, match=r"holds proportions no person has \(segment factor overall "
+                                                        r"= 7.0 is outside 0.5-2.0.*; recalibrate\)$"):
+        actor_file.proportions_for_body(edited, body)
     run = subprocess.run([sys.executable, "-m", "markerless_mocap", "track", "--scene", str(subject_blend_path()),
                           "--capture", str(tmp_path), "--out", str(tmp_path / "o"), "--actor", str(bad)],
                          capture_output=True, text=True, timeout=120)
