@@ -96,10 +96,17 @@ def compare_bodies(fit, subject, tracker, targets, rig_poses):
     from .hip_width_by_masks import hip_width_by_masks, widened
     from .trunk_leg_split import split_by_masks, traded
 
+    known = {}  # the searches end on bodies they already scored (the height's grid centre is the body chosen)
+
     def mismatch(bodies):
-        return mask_mismatch(subject, tracker.proxy, targets.cameras, targets.masks,
-                             [(p, rig_poses) for p in bodies], targets.keypoints, targets.resolution(tracker),
-                             tracker.settings.backend)
+        bodies = list(bodies)
+        keys = [(tuple(sorted(p.factors.items())), p.overall) for p in bodies]
+        new = {k: p for k, p in zip(keys, bodies) if k not in known}
+        costs = mask_mismatch(subject, tracker.proxy, targets.cameras, targets.masks,
+                              [(p, rig_poses) for p in new.values()], targets.keypoints, targets.resolution(tracker),
+                              tracker.settings.backend)
+        known.update(zip(new, costs))
+        return [known[k] for k in keys]
 
     bodies = candidate_bodies(fit)
     halfway = bodies["halfway"]

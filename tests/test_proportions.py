@@ -241,6 +241,41 @@ def test_the_masks_choose_between_the_rig_and_the_halfway_body(walk):
     assert scaled.lengths["height"] == pytest.approx(1.80, rel=1e-6)
 
 
+def test_the_body_choice_scores_each_body_once(walk, monkeypatch):
+    """compare_bodies' searches (split, hip width, height) and the final choice end on bodies already scored (the
+    height's grid centre is the body chosen): each body's frames are refitted once, and the costs are those of
+    scoring every body afresh."""
+    from types import SimpleNamespace
+
+    from markerless_mocap.core import calibration_check
+    from markerless_mocap.core.proportions_fit import ProportionsFit
+
+    body, poses = walk
+    fitted = Proportions({"spine": 1.06, "thigh": 0.95, "forearm": 1.04, "hip_width": 0.97}, 1.0)
+    lengths = segment_lengths(scaled_body(body, fitted))
+    fit = ProportionsFit(fitted, lengths, segment_lengths(body), [0, 1, 2], 0.03, 0.02, poses[:3], {})
+    target = {"spine": 0.02, "thigh": -0.01, "hip_width": 0.02}  # log-factors the fake masks like best
+
+    def cost(p):
+        return sum((np.log(p.factors.get(k, 1.0)) - target.get(k, 0.0)) ** 2 for k in p.factors) + np.log(
+            p.overall) ** 2
+
+    scored = []
+
+    def fake_mask_mismatch(subject, proxy, cameras, masks, candidates, *args):
+        scored.extend((tuple(sorted(p.factors.items())), p.overall) for p, _ in candidates)
+        return [cost(p) for p, _ in candidates]
+
+    monkeypatch.setattr(calibration_check, "mask_mismatch", fake_mask_mismatch)
+    targets = SimpleNamespace(cameras=[], masks=[], keypoints=[], resolution=lambda tracker: 1.0)
+    tracker = SimpleNamespace(proxy=None, settings=SimpleNamespace(backend="fast"))
+    comparison = calibration_check.compare_bodies(fit, body, tracker, targets, poses[:3])
+    assert len(scored) == len(set(scored)), "a body was scored twice"
+    assert comparison.split["grid"] and comparison.hip_width["grid"] and comparison.height["grid"]
+    for name, proportions in comparison.bodies.items():
+        assert comparison.mismatch[name] == pytest.approx(cost(proportions))
+
+
 def test_the_masks_find_the_trunk_leg_split(walk):
     """core/trunk_leg_split.py: a trade keeps spine + thigh (the standing height) and changes the spine by exp(t);
     on synthetic masks of an actor whose spine is 6 % shorter and thighs longer by the same length, the search
