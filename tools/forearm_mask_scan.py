@@ -100,9 +100,11 @@ def edge_mismatch(model, proxy, cameras, masks, candidates, keypoints, resolutio
     from markerless_mocap.core.proportions_silhouette import refit_poses, scaled_proxy
     from markerless_mocap.core.render import reference
 
-    edge_distance = [[cv2.distanceTransform((cv2.Canny(cv2.GaussianBlur(cv2.cvtColor(im, cv2.COLOR_BGR2GRAY), (3, 3), 0),
-                                                       40, 120) == 0).astype(np.uint8), cv2.DIST_L2, 3)
-                      for im in frame] for frame in images]
+    def distance_to_edges(image):
+        edges = cv2.Canny(cv2.GaussianBlur(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), (3, 3), 0), 40, 120)
+        return cv2.distanceTransform((edges == 0).astype(np.uint8), cv2.DIST_L2, 3)
+
+    edge_distance = [[distance_to_edges(im) for im in frame] for frame in images]
     arms = [model.part_names.index(f"{side}_elbow") + 1 for side in "lr"]
     costs = []
     for proportions, start in candidates:
