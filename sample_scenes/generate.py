@@ -28,10 +28,10 @@ import cv2  # noqa: E402
 
 import stage  # noqa: E402
 import subject  # noqa: E402
-from core.camera import BlenderCameraParams, Camera, camera_from_blender, camera_to_blender  # noqa: E402
+from core.capture.camera import BlenderCameraParams, Camera, camera_from_blender, camera_to_blender  # noqa: E402
 from core.capture.calibration import write_easymocap_calibration, write_toml_calibration  # noqa: E402
 from core.mocap import read_bvh, retarget  # noqa: E402
-from core.proportions import Proportions  # noqa: E402
+from core.actor.proportions import Proportions  # noqa: E402
 
 W, H, FPS = 640, 480, 30
 
@@ -49,7 +49,7 @@ SCENES = {
                            (130, 3.6, 1.35, 500, (-6.0, 2.0), -1.2),
                            (215, 3.7, 1.90, 560, (7.5, 5.0), 1.5),
                            (315, 3.6, 1.45, 510, (-3.5, -5.5), -0.4)]),
-    # the hard scene of issue 13 (not tuned on): see sample_scenes/README.md. Cameras stand on one side of
+    # the hard scene of issue 13 (not tuned on): see docs/sample-scenes.md. Cameras stand on one side of
     # the subject's path (azimuths relative to the side facing away from the second person), so the second
     # person walks behind the subject in every view.
     "busy": dict(bvh="131_01.bvh", start=120, n_frames=80, seed=1313, uncontrolled=True, calibration="toml",
@@ -89,7 +89,7 @@ SCENES = {
                            (23, 5, 6, 5, {"Left": "face", "Right": "face"}),
                            (39, 4, 5, 4, {"Left": "shoulder"}),
                            (50, 4, 3, 3, {"Right": "shoulder"})]),
-    # held out like dusk, made in session 15 before any change of that session was measured: 01_01's forward
+    # held out like dusk, made on 2026-11-25 before any change of that day was measured: 01_01's forward
     # jumps just after the stretch dusk's second person uses (source frames 430-489), both arms crossed early, a
     # fifth camera layout (calibration.toml), clothes of its own and a second person; busy's room and dimmer.
     "lobby": dict(bvh="01_01.bvh", start=430, n_frames=60, seed=3717, uncontrolled=True, calibration="toml",
@@ -117,7 +117,7 @@ SCENES = {
                       (215, 3.8, 1.30, 580, (3.0, 7.0), 0.5),
                       (300, 3.4, 1.70, 500, (-8.0, -2.5), -0.8)],
                   proportions=dict(overall=0.92, factors={"forearm": 0.92 * 1.10}), subject_from="walk"),
-    # issue 15, held out: made in session 20 before anything was measured on it, after the calibration's last
+    # issue 15, held out: made on 2026-11-26 before anything was measured on it, after the calibration's last
     # change. Another build than the actor scene's, not a uniform scale: 5 % taller than the subject, with
     # (relative to that) shoulders 8 % and hips 6 % wider, a 4 % longer spine, 5 % shorter thighs and 6 %
     # shorter forearms; 131_01's stop and stand after the walk (source frames 200-239), walk's subject.blend
@@ -133,7 +133,7 @@ SCENES = {
                                                            "spine": 1.05 * 1.04, "thigh": 1.05 * 0.95,
                                                            "forearm": 1.05 * 0.94}),
                    subject_from="walk"),
-    # issue 15, held out like actor2 (made in session 20, its baseline measured once): a third build, slight and
+    # issue 15, held out like actor2 (made on 2026-11-26, its baseline measured once): a third build, slight and
     # long-limbed: 3 % shorter overall than the subject, with (relative to that) a 12 % longer neck, shoulders
     # 7 % and hips 5 % narrower, a 4 % shorter spine, thighs 5 %, shins and upper arms 4 % longer; a forward
     # jump of 01_01 (source frames 80-119), playground's subject.blend unchanged (turned 15.5 degrees from the
@@ -149,7 +149,7 @@ SCENES = {
                                                            "thigh": 0.97 * 1.05, "shin": 0.97 * 1.04,
                                                            "upper_arm": 0.97 * 1.04}),
                    subject_from="playground"),
-    # issue 15, held out (made in session 21 before anything was measured on it, to judge the calibration's
+    # issue 15, held out (made on 2026-11-26 before anything was measured on it, to judge the calibration's
     # next change): a stocky build, long trunk on short legs, the opposite of actor3: 5 % shorter overall than the
     # subject, with (relative to that) a 6 % longer spine, 8 % shorter neck, shoulders 6 % and hips 3 % wider,
     # thighs 6 % and shins 4 % shorter, upper arms 3 % shorter and forearms 4 % longer; 131_01 before the walk
@@ -167,7 +167,7 @@ SCENES = {
                                                            "thigh": 0.95 * 0.94, "shin": 0.95 * 0.96,
                                                            "upper_arm": 0.95 * 0.97, "forearm": 0.95 * 1.04}),
                    subject_from="playground"),
-    # issue 15, held out (made in session 21 after actor4's figures, before anything was measured on it, to judge
+    # issue 15, held out (made on 2026-11-26 after actor4's figures, before anything was measured on it, to judge
     # the choice among bodies between the rig and the calibration): tall and long-armed, 7 % taller overall than
     # the subject, with (relative to that) upper arms 5 % and forearms 6 % longer, hips 6 % narrower, a 2 % shorter
     # spine, thighs 3 % and shins 2 % longer; a forward jump of 01_01 (source frames 140-179: the hips rise 35 cm
@@ -182,7 +182,7 @@ SCENES = {
                                                            "hip_width": 1.07 * 0.94, "spine": 1.07 * 0.98,
                                                            "thigh": 1.07 * 1.03, "shin": 1.07 * 1.02}),
                    subject_from="playground"),
-    # issue 15, held out (made in session 21 after actor5's figures, before anything was measured on it, to judge
+    # issue 15, held out (made on 2026-11-26 after actor5's figures, before anything was measured on it, to judge
     # the halfway body): 2 % shorter overall than the subject, with (relative to that) hips 6 % wider, shoulders
     # 5 % narrower, arms shorter (upper arm 5 %, forearm 4 %), a 3 % longer spine, 5 % longer neck, 3 % longer
     # shins and 4 % longer feet; 01_01 (source frames 30-69: standing with the hands at chest height, a deep
@@ -199,7 +199,7 @@ SCENES = {
                                                            "spine": 0.98 * 1.03, "neck": 0.98 * 1.05,
                                                            "shin": 0.98 * 1.03, "foot": 0.98 * 1.04}),
                    subject_from="playground"),
-    # issue 15, held out (made in session 21 after actor6's figures, before anything was measured on it, to judge
+    # issue 15, held out (made on 2026-11-26 after actor6's figures, before anything was measured on it, to judge
     # the masks' choice of the trunk/leg split): 2 % taller overall than the subject, with (relative to that) a 5 %
     # shorter spine, 5 % shorter neck, thighs 5 % and shins 3 % longer, shoulders 4 % wider; 01_01 standing between
     # jumps (source frames 236-275, the hips within 3 cm), playground's subject.blend unchanged, four cameras of its
@@ -214,7 +214,7 @@ SCENES = {
                                                            "thigh": 1.02 * 1.05, "shin": 1.02 * 1.03,
                                                            "shoulder_width": 1.02 * 1.04}),
                    subject_from="playground"),
-    # issue 15, held out (made in session 22 before anything was measured on it, to judge how the masks set the
+    # issue 15, held out (made on 2026-11-26 before anything was measured on it, to judge how the masks set the
     # forearm): 6 % shorter overall than the subject, with (relative to that) forearms 9 % longer, upper arms
     # 4 % shorter, hips 4 % narrower, shins 3 % longer; 131_01 before the walk (source frames 52-91: standing,
     # shuffling, turning), playground's subject.blend unchanged, four cameras of its own, plates.
@@ -227,12 +227,13 @@ SCENES = {
                    proportions=dict(overall=0.94, factors={"forearm": 0.94 * 1.09, "upper_arm": 0.94 * 0.96,
                                                            "hip_width": 0.94 * 0.96, "shin": 0.94 * 1.03}),
                    subject_from="playground"),
-    # issue 15, held out (made in session 25 before anything was measured on it): the first actor build in an
+    # issue 15, held out (made on 2026-11-26 before anything was measured on it): the first actor build in an
     # uncontrolled room (no plates, busy's clutter and changing light, a second person behind, sensor noise and
     # blur), where users' footage is. 4 % taller overall than the subject, with (relative to that) upper arms 6 %
     # longer, forearms 5 % shorter, shoulders 5 % narrower, a 6 % longer neck, thighs 4 % shorter, shins 3 % longer,
     # feet 5 % shorter; 01_01 just before playground's stretch (source frames 530-569: the end of a turn,
-    # facing as playground's subject does) with its own gestures, playground's subject.blend unchanged, EasyMocap calibration, four cameras of its own.
+    # facing as playground's subject does) with its own gestures, playground's subject.blend unchanged,
+    # EasyMocap calibration, four cameras of its own.
     "actor9": dict(bvh="01_01.bvh", start=530, n_frames=40, seed=9090, uncontrolled=True, calibration="easymocap",
                    busy=True, noise=6.0, blur=0.7,
                    cameras=[
@@ -251,7 +252,7 @@ SCENES = {
                                                            "thigh": 1.04 * 0.96, "shin": 1.04 * 1.03,
                                                            "foot": 1.04 * 0.95}),
                    subject_from="playground"),
-    # issue 15, held out (made in session 25 with actor9, before anything was measured on it): a studio build of
+    # issue 15, held out (made on 2026-11-26 with actor9, before anything was measured on it): a studio build of
     # its own, 4 % shorter overall than the subject, with (relative to that) shoulders 6 % wider, upper arms 4 %
     # longer, forearms 4 % shorter, a 3 % shorter spine, thighs 3 % longer, feet 6 % longer; 01_01 between actor5's
     # and actor7's stretches (source frames 185-224), playground's subject.blend unchanged, plates.
@@ -265,7 +266,7 @@ SCENES = {
                                                             "forearm": 0.96 * 0.96, "spine": 0.96 * 0.97,
                                                             "thigh": 0.96 * 1.03, "foot": 0.96 * 1.06}),
                     subject_from="playground"),
-    # issue 15, held out (made in session 26 before anything was measured on them): two more actor builds in
+    # issue 15, held out (made on 2026-11-27 before anything was measured on them): two more actor builds in
     # uncontrolled rooms like actor9's (no plates, busy's kind of clutter and changing light, a second person
     # behind, sensor noise and blur), to judge rules for such rooms on captures they were not read off.
     # actor11: 3 % shorter overall than the subject, with (relative to that) a 5 % longer spine, hips 6 % and
@@ -599,7 +600,8 @@ def second_person_visibility(cams, P, P2):
     for cam in cams:
         uv2, z2 = cam.project_with_depth(P2.reshape(-1, 3))
         uv2, z2 = uv2.reshape(P2.shape[0], -1, 2), z2.reshape(P2.shape[0], -1)
-        inside = (uv2[..., 0] >= 0) & (uv2[..., 0] < cam.width) & (uv2[..., 1] >= 0) & (uv2[..., 1] < cam.height) & (z2 > 0)
+        inside = ((uv2[..., 0] >= 0) & (uv2[..., 0] < cam.width) & (uv2[..., 1] >= 0) & (uv2[..., 1] < cam.height)
+                  & (z2 > 0))
         uv1, z1 = cam.project_with_depth(P.reshape(-1, 3))
         uv1, z1 = uv1.reshape(P.shape[0], -1, 2), z1.reshape(P.shape[0], -1)
         hip = 0   # Hips is the root, first in the rig's order
@@ -819,7 +821,8 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     if cfg.get("proportions"):
         subject_data = data
         data = subject.scaled_subject_data(data, Proportions(**cfg["proportions"]))
-        first_hips_xy = json.loads((out_root / cfg["subject_from"] / "scene_info.json").read_text())["first_frame_hips"][:2]
+        first_hips_xy = json.loads((out_root / cfg["subject_from"] / "scene_info.json").read_text())[
+            "first_frame_hips"][:2]
     arm, body = subject.build_subject(bpy, data, colours=cfg.get("colours"))
     clip, res, names, parents, rest, tails, shift = retarget_scene(cfg, data_dir, arm, F, first_hips_xy)
     if cfg.get("gestures"):
@@ -885,7 +888,7 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
         if np.abs(back.K - cam.K).max() > 1e-4 or np.abs(back.R - cam.R).max() > 1e-6:
             raise RuntimeError(f"{cam.name}: the Blender camera does not reproduce the calibration")
     (out / "render_cameras.json").write_text(json.dumps(
-        {"note": "Blender camera objects exactly as rendered (created with core.camera.camera_to_blender)",
+        {"note": "Blender camera objects exactly as rendered (created with core.capture.camera.camera_to_blender)",
          "cameras": records}, indent=1))
     for old in ("calibration.toml", "intri.yml", "extri.yml"):
         (out / old).unlink(missing_ok=True)
@@ -929,8 +932,8 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     bpy.ops.wm.save_as_mainfile(filepath=str(Path(tempfile.gettempdir()) / f"mocap_scene_{name}.blend"))
 
     # subject.blend: rest pose, near the first frame's root, with a seeded placement error
-    O = res.pose_matrices[0, rootb, :3, :3] @ rest[rootb, :3, :3].T   # root rotation from rest
-    fwd = O @ np.array([0.0, -1.0, 0.0])                             # the rest pose faces -Y
+    root_rot = res.pose_matrices[0, rootb, :3, :3] @ rest[rootb, :3, :3].T   # root rotation from rest
+    fwd = root_rot @ np.array([0.0, -1.0, 0.0])                             # the rest pose faces -Y
     yaw0 = math.atan2(fwd[1], fwd[0]) - math.atan2(-1.0, 0.0)
     if cfg.get("subject_from"):
         placement = reuse_subject(out_root / cfg["subject_from"], out, hips[0], yaw0,
@@ -956,7 +959,7 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     if cfg.get("proportions"):
         info["actor"] = dict(
             note="the body rendered differs from subject.blend (the tracker's subject): the subject's segments "
-                 "scaled by these factors (core.proportions); gt_joints.npz are the actor's joints",
+                 "scaled by these factors (core.actor.proportions); gt_joints.npz are the actor's joints",
             proportions=cfg["proportions"],
             true_segment_lengths_m=subject.segment_lengths_of(data, rest, names),
             subject_segment_lengths_m=subject.segment_lengths_of(subject_data, rest, names))

@@ -1,4 +1,4 @@
-"""Measure what makes a rendered sample scene hard (the figures in sample_scenes/README.md).
+"""Measure what makes a rendered sample scene hard (the figures in docs/sample-scenes.md).
 
     .venv/bin/python sample_scenes/measure.py --scene busy [--scene playground ...]
 

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from markerless_mocap.core.camera import BlenderCameraParams, camera_from_blender
+from markerless_mocap.core.capture.camera import BlenderCameraParams, camera_from_blender
 from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
@@ -265,7 +265,7 @@ def _both_arms_crossed(P, idx, lat, fwd):
     return crossed
 
 
-# ---- lobby: held out like dusk, made before session 15 measured anything on it ------------------------
+# ---- lobby: held out like dusk, made before anything was measured on it -------------------------------
 def test_lobby_arms_cross_both_ways_and_the_body_jumps():
     d = scene_dir("lobby")
     names, _, P = load_gt(d)

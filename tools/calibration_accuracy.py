@@ -1,7 +1,7 @@
 """How far calibrations missed the actors' true lengths: per scene and segment, calibrated / true - 1 in per cent,
 how many of the ten lengths are within 3 %, and each segment's RMS over the scenes. The RMS of the segments past
-3 % is what core/measured_lengths.FOOTAGE_MISS_PERCENT ships (the summary's "the footage reads it to ..."); re-run
-this after a change to the calibration and update that table and the README's ("Actor calibration").
+3 % is what core/actor/measured_lengths.FOOTAGE_MISS_PERCENT ships (the summary's "the footage reads it to ..."); re-run
+this after a change to the calibration and update that table and docs/actor-calibration.md ("How well it works").
 
     .venv/bin/python tools/calibration_accuracy.py ACTOR_JSON:SCENE [ACTOR_JSON:SCENE ...]
 
@@ -25,7 +25,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("pairs", nargs="+")
     args = ap.parse_args(argv)
-    from markerless_mocap.core.measured_lengths import FOOTAGE_MISS_PERCENT
+    from markerless_mocap.core.actor.measured_lengths import FOOTAGE_MISS_PERCENT
 
     names, misses = [], []
     for pair in args.pairs:

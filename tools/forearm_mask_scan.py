@@ -3,16 +3,16 @@ least mismatch lies against the actor's true forearm (docs/actor-calibration.md,
 
 Each candidate body (the calibration's, its forearm scaled by exp(step), steps -12 % to +12 % by 3 %) gets
 its frames refitted to the masks and landmarks by the tracker's local fit from the calibration's poses, then
-its XOR / model area (core/calibration_check.mask_mismatch, as the calibration's body choice). With --wrist the
+its XOR / model area (core/actor/body_choice.mask_mismatch, as the calibration's body choice). With --wrist the
 model gets two more angles per hand (flexion and deviation of the bone that ends the forearm), so the hand's
-outline can bend as the actor's does. Measured (session 24): with the true masks the wrist brings 4 of 7
+outline can bend as the actor's does. Measured (2026-11-26): with the true masks the wrist brings 4 of 7
 builds within 3 % (1 of 7 without); with the learned masks 2 of 7. With --trade the length moves between the
-upper arm and the forearm at a constant arm span (the elbow slides along the arm, the hand stays): session 28,
+upper arm and the forearm at a constant arm span (the elbow slides along the arm, the hand stays): 2026-11-27,
 learned masks, calibration frames 0-19 of `calibrate --seed 0`, least mismatch against the truth's forearm share,
 per cent: actor -12.2, actor2 +2.6, actor3 -1.1, actor4 +8.7, actor5 -2.1, actor7 -8.5, actor8 -3.4, actor10 -3.7,
 actor11 -8.0 (3 of 9 within 3 %; the mismatch moves by 0.001-0.003 over the grid).
 With --score edges each candidate's refitted frames are scored by the distance from the arms' outline to the
-image's Canny edges instead of the masks' XOR: session 29, learned masks, frames 0,2,...,18, 3 of 9 within 3 %
+image's Canny edges instead of the masks' XOR: 2026-11-27, learned masks, frames 0,2,...,18, 3 of 9 within 3 %
 with or without the wrist (docs/actor-calibration.md).
 
     .venv/bin/python tools/forearm_mask_scan.py RESULT:SCENE [RESULT:SCENE ...] [--wrist]
@@ -38,8 +38,8 @@ EDGE_CAP = 8.0  # pixels: an outline point farther from every image edge counts 
 def with_wrist(body):
     """`body` with a flexion and a deviation angle on each hand (the bone that continues the forearm), appended
     after its own DOF so its pose vectors extend with zeros."""
-    from markerless_mocap.core.body import Body, Dof, DofTarget
-    from markerless_mocap.core.keypoints import end_bone
+    from markerless_mocap.core.body.model import Body, Dof, DofTarget
+    from markerless_mocap.core.evidence.keypoints import end_bone
 
     extra = []
     for side in "lr":
@@ -53,7 +53,7 @@ def with_wrist(body):
 
 def arm_traded(proportions, rig_lengths, t):
     """`proportions` with the forearm x exp(t) and the upper arm shorter by the length the forearm gained."""
-    from markerless_mocap.core.proportions import Proportions
+    from markerless_mocap.core.actor.proportions import Proportions
 
     factors = dict(proportions.factors)
     gained = rig_lengths["forearm"] * proportions.factor("forearm") * (np.exp(t) - 1.0)
@@ -66,8 +66,8 @@ def scene_masks(kind, scene, tracker, frames, poses, threshold):
     """(per frame one bool mask per camera, the cameras at the masks' resolution)."""
     import cv2
 
-    import markerless_mocap.core.features.learned as learned_model
-    from markerless_mocap.core.proportions_silhouette import calibration_masks
+    import markerless_mocap.core.evidence.learned as learned_model
+    from markerless_mocap.core.actor.silhouette_fit import calibration_masks
 
     cams = tracker.capture.cameras
     if kind == "true":
@@ -91,13 +91,13 @@ def scene_masks(kind, scene, tracker, frames, poses, threshold):
 
 
 def edge_mismatch(model, proxy, cameras, masks, candidates, keypoints, resolution, images):
-    """Per candidate (Proportions, start poses): its frames refitted as core/calibration_check.mask_mismatch does,
+    """Per candidate (Proportions, start poses): its frames refitted as core/actor/body_choice.mask_mismatch does,
     then the mean distance in pixels (capped at EDGE_CAP) from the arms' outline where it meets the background to
     the nearest Canny edge of the image (images: per frame one BGR image per camera, at the cameras' resolution).
     Sharp where the learned masks are soft: the rendered hand's outline ends on an image edge."""
     import cv2
 
-    from markerless_mocap.core.proportions_silhouette import refit_poses, scaled_proxy
+    from markerless_mocap.core.actor.silhouette_fit import refit_poses, scaled_proxy
     from markerless_mocap.core.render import reference
 
     def distance_to_edges(image):
@@ -141,12 +141,13 @@ def main(argv=None):
     import bpy
 
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
-    from markerless_mocap.core.calibration_check import mask_mismatch
+    from markerless_mocap.core.actor.body_choice import mask_mismatch
     from markerless_mocap.core.capture.capture import load_capture
-    from markerless_mocap.core.keypoints import rig_keypoints
-    from markerless_mocap.core.proportions import Proportions, segment_lengths
-    from markerless_mocap.core.proportions_fit import targets_from_landmarks
-    from markerless_mocap.core.tracking import Tracker, TrackingSettings
+    from markerless_mocap.core.evidence.keypoints import rig_keypoints
+    from markerless_mocap.core.actor.proportions import Proportions, segment_lengths
+    from markerless_mocap.core.actor.landmark_fit import targets_from_landmarks
+    from markerless_mocap.core.tracking.settings import TrackingSettings
+    from markerless_mocap.core.tracking.tracker import Tracker
 
     frames = [int(f) for f in args.frames.split(",")]
     errors = []

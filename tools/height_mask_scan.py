@@ -1,13 +1,13 @@
 """Where the person masks and the landmarks put the actor's height, against the truth: `calibrate` a scene as
-shipped and read its record of core/height_by_masks.py (actor.json > silhouettes > body_check > height), which
+shipped and read its record of core/actor/height_by_masks.py (actor.json > silhouettes > body_check > height), which
 scans the halfway body's segments by a common factor with every candidate's calibration frames refitted to the
 masks (docs/actor-calibration.md).
 
     .venv/bin/python tools/height_mask_scan.py SCENE [SCENE ...] [--out DIR]
 
 SCENE: a capture folder with subject.blend; the truth is scene_info.json > actor (or, without one, the subject's
-own height). Measured (session 25, seed 0): the masks within 1.4 % of the true height on all 15 rendered scenes
-with one, where the landmark fit's was 4.0 % short on actor9 and 2.9 % on lobby; session 27: actor12 -7.1 % from
+own height). Measured (2026-11-26, seed 0): the masks within 1.4 % of the true height on all 15 rendered scenes
+with one, where the landmark fit's was 4.0 % short on actor9 and 2.9 % on lobby; 2026-11-27: actor12 -7.1 % from
 the landmarks' body, +1.1 % from the masks (the gate's line in `calibrate`).
 """
 import argparse

@@ -3,9 +3,9 @@ tracked pose and of the true pose, and where the local fit (the ICP step after t
 AT the true pose.
 
 The true pose is the rig fitted to the true joints over the whole clip up to the last frame asked for, each frame
-warm-started from the one before (core/pose_fitting.poses_from_joints). Fitting single frames from the rest pose
+warm-started from the one before (core/body/pose_fit.poses_from_joints). Fitting single frames from the rest pose
 is not enough: with the arms crossed (busy, frames 34-44) such fits land 0.1-0.3 m off on the crossed arm, and
-energies compared at them blame the energy wrongly (session 16 found an earlier diagnosis built on that).
+energies compared at them blame the energy wrongly (an earlier diagnosis was built on that; docs/measurements.md, busy).
 
 If the truth costs less than the tracked pose and the local fit stays there, the search missed it; if the truth
 costs more, or the local fit walks away from it, the energy's minimum is elsewhere. The local fit is repeated
@@ -31,12 +31,12 @@ def main(argv=None):
     frames = [int(f) for f in args.frames.split(",")]
 
     from markerless_mocap.addon.scene_bridge import find_armature
-    from markerless_mocap.core.evaluation import EVAL_JOINTS
-    from markerless_mocap.core.likelihood import default_pose_at
+    from markerless_mocap.core.results.evaluation import EVAL_JOINTS
+    from markerless_mocap.core.energy.likelihood import default_pose_at
     from markerless_mocap.core.optimizers import icp
-    from markerless_mocap.core.pose_fitting import poses_from_joints
-    from markerless_mocap.core.results import ResultWriter, load_joints
-    from markerless_mocap.core.tracking import TrackingSettings
+    from markerless_mocap.core.body.pose_fit import poses_from_joints
+    from markerless_mocap.core.results.result_folder import ResultWriter, load_joints
+    from markerless_mocap.core.tracking.settings import TrackingSettings
     from markerless_mocap.operators.cmd_track import open_subject
     from markerless_mocap.operators.track_session import TrackSession
 
@@ -69,7 +69,7 @@ def main(argv=None):
             tracked = solved["poses"][list(solved["frames"]).index(frame)]
             truth = truth_poses[list(truth_frames).index(frame)]
             tracker.anchor = np.eye(3)
-            feats = tracker.load_frame(frame, guide_poses=tracked[None])
+            tracker.load_frame(frame, guide_poses=tracked[None])
             terms = tracker.energy.terms(np.stack([tracked, truth]))
             split = ", ".join(f"{n} {getattr(weights, n) * v[0]:.2f}/{getattr(weights, n) * v[1]:.2f}"
                               for n, v in terms.items())
@@ -78,7 +78,7 @@ def main(argv=None):
                   f"error tracked {errors(tracked, frame)}, truth fit {errors(truth, frame)}")
             for label, change in variants.items():
                 icp.IcpSettings = lambda *a, change=change, **k: dataclasses.replace(base_settings(*a, **k), **change)
-                fitted = tracker.to_absolute(tracker._icp_fit(feats, tracker.to_relative(truth)))
+                fitted = tracker.to_absolute(tracker.fit_locally(tracker.to_relative(truth)))
                 icp.IcpSettings = base_settings
                 print(f"   local fit from the truth{' ' + label if label else ''}: energy "
                       f"{float(tracker.energy(fitted[None])[0]):.2f}, error {errors(fitted, frame)}")
