@@ -2,9 +2,11 @@
 # One entry point for a fresh Linux machine: checks the system libraries bpy needs,
 # creates .venv with the pinned packages, then runs what you asked for:
 #   bash setup.sh demo     track the bundled sample scene and print its error
-#   bash setup.sh test     run the test suite (bpy 5.0.1, Python 3.11), then a subset on bpy 5.2.3
-#                          (Python 3.13, .venv313) when a Python 3.13 is found, or say that it is skipped
-#   bash setup.sh build    build the installable extension zip into dist/
+#   bash setup.sh test     lint (ruff, settings in pyproject.toml), run the test suite (bpy 5.0.1, Python 3.11),
+#                          then a subset on bpy 5.2.3 (Python 3.13, .venv313) when a Python 3.13 is found, or
+#                          say that it is skipped
+#   bash setup.sh build    build the installable extension zips into dist/, one per platform (linux-x64,
+#                          windows-x64, macos-arm64); --all-platforms makes one zip for all three
 #   bash setup.sh env      only set up the environment
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -45,7 +47,7 @@ venv="$here/.venv"
 stamp="$venv/.requirements.sha"
 want="$(sha256sum requirements.txt | cut -d' ' -f1)"
 if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-  echo "setup.sh: creating $venv with the pinned packages (about 1.3 GB, once)" >&2
+  echo "setup.sh: installing the pinned packages of requirements.txt into $venv (about 1.3 GB the first time)" >&2
   "$py" -m venv "$venv"
   "$venv/bin/python" -m pip install -q --disable-pip-version-check -r requirements.txt
   echo "$want" > "$stamp"
@@ -100,6 +102,11 @@ case "$cmd" in
   demo)  exec "$venv/bin/python" -m markerless_mocap demo "$@" ;;
   test)
     rc=0
+    echo "setup.sh: lint: ruff check (rules in pyproject.toml)" >&2
+    if ! "$venv/bin/ruff" check "$here"; then
+      echo "setup.sh: ruff found the problems listed above; fix them (the tests do not run until the lint is clean)" >&2
+      exit 1
+    fi
     echo "setup.sh: test suite on bpy 5.0.1 (Python 3.11, $venv)" >&2
     "$venv/bin/python" -m pytest -q "$here/tests" "$@" || rc=$?
     if setup_venv313; then

@@ -1,9 +1,12 @@
-"""The installable zip: build it for linux-x64 with cp311 and cp313 wheels (from dist/wheels-cache, else
-PyPI once per machine), check what is inside, install it into a fresh bpy process, restart, and use the
-bundled cv2/scipy/numba from the extension's own site-packages.
+"""The installable zips: build one per platform (linux-x64, windows-x64, macos-arm64) with cp311 and cp313
+wheels (from dist/wheels-cache, else PyPI once per machine), check that each manifest lists only its
+platform and its wheels, install the linux-x64 zip into a fresh bpy process, restart, and use the bundled
+cv2/scipy/numba from the extension's own site-packages. The windows-x64 and macos-arm64 zips are
+installed and enabled with Blender's platform check told their platform (tools/install_probe.py
+install-as): Blender unpacks no foreign wheel, so the add-on runs on this Python's own packages.
 
 `bash setup.sh test` runs this file on bpy 5.0.1 (Python 3.11, .venv) and again on bpy 5.2.3 (Python
-3.13, .venv313): the same zip must install and work in both."""
+3.13, .venv313): the same zips must install and work in both."""
 import hashlib
 import importlib.util
 import json
@@ -18,13 +21,14 @@ from pathlib import Path
 
 import pytest
 
-from markerless_mocap.operators import cli
+from markerless_mocap.operators import cli, cmd_build
 from markerless_mocap.operators.cmd_build import build_extension
 from markerless_mocap.tools import extension_builder, staging, wheels
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = "markerless_mocap"
-PLATFORM = "linux-x64"
+PLATFORM = "linux-x64"  # the one this machine loads
+FOREIGN = ("windows-x64", "macos-arm64")
 CACHE = REPO / "dist" / "wheels-cache"
 PROBE = REPO / "tools" / "install_probe.py"
 HAVE_BPY = importlib.util.find_spec("bpy") is not None
@@ -59,9 +63,13 @@ def build(tmp_path_factory):
     out = tmp_path_factory.mktemp("dist")
     started = time.time()
     messages = []
-    zips = build_extension(out, platforms=[PLATFORM], cache_dir=CACHE, log=messages.append)
-    assert len(zips) == 1
-    return {"zip": zips[0], "started": started, "messages": messages}
+    zips = build_extension(out, cache_dir=CACHE, log=messages.append)  # the default: one zip per platform
+    by_platform = {}
+    for path, platforms in zips.items():
+        assert len(platforms) == 1, zips
+        by_platform[platforms[0]] = path
+    assert sorted(by_platform) == sorted([PLATFORM, *FOREIGN])
+    return {"zip": by_platform[PLATFORM], "zips": by_platform, "started": started, "messages": messages}
 
 
 def _zip_manifest(zf):
@@ -72,42 +80,67 @@ def _zip_manifest(zf):
 
 @pytest.mark.slow
 @needs_bpy
-def test_zip_lists_exactly_the_wheels_it_carries(build):
-    with zipfile.ZipFile(build["zip"]) as zf:
+@pytest.mark.parametrize("platform", [PLATFORM, *FOREIGN])
+def test_each_zip_lists_only_its_platform_and_exactly_the_wheels_it_carries(build, platform):
+    zip_path = build["zips"][platform]
+    assert zip_path.name == f"{PACKAGE}-{_version()}-{platform.replace('-', '_')}.zip"
+    with zipfile.ZipFile(zip_path) as zf:
         manifest = _zip_manifest(zf)
         names = set(zf.namelist())
+    assert manifest["platforms"] == [platform]
+    assert "generated" not in manifest.get("build", {})  # the plain keys say it; no per-platform override
     listed = manifest["wheels"]
     assert all(w.startswith("./wheels/") for w in listed), listed
     in_zip = {n for n in names if n.endswith(".whl")}
     assert {w[2:] for w in listed} == in_zip
-    assert manifest["platforms"] == [PLATFORM]
     assert wheels.DEFAULT_PYTHON_VERSIONS == ((3, 11), (3, 13))
     for python in wheels.DEFAULT_PYTHON_VERSIONS:  # Blender 4.2-5.0 and Blender 5.1-5.2
         dists = {}
         for w in in_zip:
-            if not wheels.wheel_fits(Path(w).name, PLATFORM, python):
+            if not wheels.wheel_fits(Path(w).name, platform, python):
                 continue
             name, version, _, _ = wheels.parse_wheel_filename(Path(w).name)
             assert name not in dists, f"two wheels of {name} for Python {python}: {in_zip}"
             dists[name] = str(version)
-        assert set(dists) == EXPECTED_DISTS, f"Python {python}: numpy must not be bundled; cv2/scipy/numba/llvmlite must"
+        assert set(dists) == EXPECTED_DISTS, \
+            f"Python {python}: numpy must not be bundled; cv2/scipy/numba/llvmlite must"
         for name in ("opencv-contrib-python-headless", "scipy", "numba"):
             assert dists[name] == PINS_BY_PYTHON[python][name], (python, name)
         if python == RUNNING_PYTHON:  # llvmlite is numba's dependency: the version the tests here run with
             from importlib.metadata import version
             assert dists["llvmlite"] == version("llvmlite")
-    assert all(any(wheels.wheel_fits(Path(w).name, PLATFORM, py) for py in wheels.DEFAULT_PYTHON_VERSIONS)
-               for w in in_zip), "a wheel no supported Blender would install"
-    print(f"linux-x64 zip: {build['zip'].stat().st_size / 1e6:.1f} MB")
+    # Every wheel is one this platform's Blender would install: no other platform's wheel rides along.
+    assert all(any(wheels.wheel_fits(Path(w).name, platform, py) for py in wheels.DEFAULT_PYTHON_VERSIONS)
+               for w in in_zip), "a wheel no supported Blender on this platform would install"
+    size_mb = zip_path.stat().st_size / 1e6
+    assert size_mb < cmd_build.UPLOAD_LIMIT_MB
+    assert any(str(zip_path) in m and f"{size_mb:.1f} MB" in m for m in build["messages"]), build["messages"]
+    print(f"{platform} zip: {size_mb:.1f} MB")
+
+
+@pytest.mark.slow
+@needs_bpy
+def test_zips_differ_only_in_their_wheels_and_manifest(build):
+    """The add-on's files are the same in every platform's zip, so what installs and enables from the
+    linux-x64 zip here is what the others carry."""
+    contents = {}
+    for platform, path in build["zips"].items():
+        with zipfile.ZipFile(path) as zf:
+            contents[platform] = {i.filename: i.CRC for i in zf.infolist()
+                                  if not i.filename.startswith("wheels/") and i.filename != "blender_manifest.toml"}
+    assert len(contents[PLATFORM]) > 10
+    for platform in FOREIGN:
+        assert contents[platform] == contents[PLATFORM], platform
 
 
 @pytest.mark.slow
 @needs_bpy
 def test_zip_wheels_are_byte_identical_to_the_downloaded_ones(build):
-    with zipfile.ZipFile(build["zip"]) as zf:
-        for name in (n for n in zf.namelist() if n.endswith(".whl")):
-            cached = CACHE / Path(name).name
-            assert hashlib.sha256(zf.read(name)).digest() == hashlib.sha256(cached.read_bytes()).digest(), name
+    for path in build["zips"].values():
+        with zipfile.ZipFile(path) as zf:
+            for name in (n for n in zf.namelist() if n.endswith(".whl")):
+                cached = CACHE / Path(name).name
+                assert hashlib.sha256(zf.read(name)).digest() == hashlib.sha256(cached.read_bytes()).digest(), name
 
 
 @pytest.mark.slow
@@ -116,16 +149,21 @@ def test_zip_holds_the_package_sources_and_nothing_of_the_dev_tree(build):
     with zipfile.ZipFile(build["zip"]) as zf:
         names = set(zf.namelist())
         assert {"__init__.py", "blender_manifest.toml"} <= names  # at the root, as Blender wants
-        dev_only = {"tests", "tools", "dist", ".git", ".venv", ".ci", "sample_scenes", "results", "__pycache__"}
-        leaked = [n for n in names if dev_only & set(Path(n).parts) or Path(n).name.startswith(".")
-                  or n in ("setup.sh", "requirements.txt")]
+        # folders of the repository root only (core/results/ is the package's own and ships)
+        dev_only = {"tests", "tools", "dist", ".git", ".venv", ".ci", "sample_scenes", "results"}
+
+        def dev_file(parts):
+            return parts[0] in dev_only or "__pycache__" in parts
+
+        leaked = [n for n in names if dev_file(Path(n).parts) or Path(n).name.startswith(".")
+                  or n in ("setup.sh", "requirements.txt", "requirements-py313.txt", "pyproject.toml")]
         assert not leaked
         # Simple reference: every .py file of the package (outside dev-only folders) is shipped,
         # unchanged. Files edited after the build started (other work in the checkout) are skipped.
         checked = 0
         for path in REPO.rglob("*.py"):
             rel = path.relative_to(REPO)
-            if dev_only & set(rel.parts) or any(p.startswith(".") for p in rel.parts):
+            if dev_file(rel.parts) or any(p.startswith(".") for p in rel.parts):
                 continue
             if path.stat().st_mtime >= build["started"] - 1:
                 continue
@@ -170,6 +208,30 @@ def test_install_enables_the_addon_and_registers_every_operator(installed):
     assert installed["install"]["blender"].startswith(str(PINS["bpy"]))  # 5.0.1 in .venv, 5.2.3 in .venv313
 
 
+@pytest.mark.slow
+@pytest.mark.bpy
+@needs_bpy
+@pytest.mark.parametrize("platform", FOREIGN)
+def test_other_platforms_zip_installs_and_enables_where_blender_takes_it_for_its_platform(build, platform,
+                                                                                            tmp_path):
+    """This Linux cannot load Windows or macOS wheels. Plain install: Blender refuses the zip (its manifest
+    names only that platform). With Blender's platform check told that platform (install_probe install-as),
+    the zip installs and enables, every operator registers, and no wheel is unpacked: Blender picks wheels
+    by this machine's own tag, and none of the zip's fits it."""
+    classes = operator_classes_in_source()
+    refused = _probe(["install", build["zips"][platform], PACKAGE, *classes], tmp_path / "plain")
+    assert not refused["enabled_in_preferences"] and not refused["package_dir_exists"]
+    report = _probe(["install-as", platform, build["zips"][platform], PACKAGE, *classes], tmp_path / "as")
+    assert report["as_platform"] == platform
+    assert not report["errors"], report["errors"]
+    assert report["install_result"] == ["FINISHED"], report
+    assert report["package_dir_exists"] and report["enabled_in_preferences"]
+    assert report["addon_utils_check"] == [True, True]
+    assert report["registered_classes"] == classes
+    assert report["unpacked"] == []
+    assert report["blender"].startswith(str(PINS["bpy"]))
+
+
 def test_manifest_covers_every_blender_the_wheels_serve():
     """4.2 LTS to 5.2 LTS: the version range, and one requirements file per Blender Python version."""
     manifest = tomllib.loads((REPO / "blender_manifest.toml").read_text())
@@ -187,6 +249,9 @@ def test_manifest_covers_every_blender_the_wheels_serve():
 def test_bundled_wheels_import_from_the_extension_site_packages(installed):
     report = installed["restart"]
     site = Path(report["extensions_dir"]) / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}"
+    # the linux-x64 wheels for this Python, and nothing else (numpy is Blender's own)
+    unpacked = {wheels.canonicalize_name(d.removesuffix(".dist-info").rsplit("-", 1)[0]) for d in report["unpacked"]}
+    assert unpacked == EXPECTED_DISTS, report["unpacked"]
     expected_versions = {"cv2": PINS["opencv-contrib-python-headless"], "scipy": PINS["scipy"],
                          "numba": PINS["numba"]}
     for name, version in expected_versions.items():
@@ -202,24 +267,63 @@ def test_operators_exist_in_the_package():
 
 # --- cache, errors, manifest editing -------------------------------------------------------------
 
+def _version():
+    return tomllib.loads((REPO / "blender_manifest.toml").read_text())["version"]
+
+
+def _wheel_names(path):
+    with zipfile.ZipFile(path) as zf:
+        return {n for n in zf.namelist() if n.endswith(".whl")}
+
+
 @pytest.mark.slow
 @needs_bpy
 def test_second_build_is_offline_and_fast(build, tmp_path, monkeypatch, capsys):
     offline_pip(monkeypatch)
     t0 = time.perf_counter()
-    code = cli.main(["build", "--out", str(tmp_path), "--platforms", PLATFORM, "--split-platforms"])
+    code = cli.main(["build", "--out", str(tmp_path), "--platforms", PLATFORM])
     elapsed = time.perf_counter() - t0
     out = capsys.readouterr().out
     assert code == 0, out
     assert "downloading" not in out
-    version = tomllib.loads((REPO / "blender_manifest.toml").read_text())["version"]
-    zip_path = tmp_path / f"{PACKAGE}-{version}-linux_x64.zip"
-    assert f"{zip_path}  " in out and " MB" in out  # path and size printed
-    with zipfile.ZipFile(zip_path) as zf, zipfile.ZipFile(build["zip"]) as ref:
-        assert {n for n in zf.namelist() if n.endswith(".whl")} == {n for n in ref.namelist() if n.endswith(".whl")}
-        generated = _zip_manifest(zf)["build"]["generated"]
-        assert generated["platforms"] == [PLATFORM]
+    zip_path = tmp_path / f"{PACKAGE}-{_version()}-linux_x64.zip"
+    assert re.search(rf"{re.escape(str(zip_path))}\s+{zip_path.stat().st_size / 1e6:.1f} MB  linux-x64\n", out), out
+    assert f"each under the {cmd_build.UPLOAD_LIMIT_MB} MB upload limit" in out
+    assert _wheel_names(zip_path) == _wheel_names(build["zip"])
+    with zipfile.ZipFile(zip_path) as zf:
+        assert _zip_manifest(zf)["platforms"] == [PLATFORM]
     print(f"cached build took {elapsed:.1f} s")
+
+
+@pytest.mark.slow
+@needs_bpy
+def test_all_platforms_option_makes_one_zip_with_every_platforms_wheels(build, tmp_path, monkeypatch, capsys):
+    offline_pip(monkeypatch)
+    assert cli.main(["build", "--out", str(tmp_path), "--all-platforms"]) == 0
+    out = capsys.readouterr().out
+    zip_path = tmp_path / f"{PACKAGE}-{_version()}.zip"
+    assert [p.name for p in tmp_path.glob("*.zip")] == [zip_path.name]
+    with zipfile.ZipFile(zip_path) as zf:
+        manifest = _zip_manifest(zf)
+    assert manifest["platforms"] == [PLATFORM, *FOREIGN]
+    assert _wheel_names(zip_path) == set().union(*(_wheel_names(p) for p in build["zips"].values()))
+    assert {w[2:] for w in manifest["wheels"]} == _wheel_names(zip_path)
+    assert f"{zip_path}  " in out and " MB" in out
+    assert f"over the {cmd_build.UPLOAD_LIMIT_MB} MB upload limit" in out and "Install from Disk" in out
+
+
+@pytest.mark.slow
+@needs_bpy
+def test_zip_over_the_upload_limit_fails_the_build_and_says_which(build, tmp_path, monkeypatch, capsys):
+    offline_pip(monkeypatch)
+    linux_mb = build["zip"].stat().st_size / 1e6
+    monkeypatch.setattr(cmd_build, "UPLOAD_LIMIT_MB", int(linux_mb) - 1)  # just under this zip's size
+    assert cli.main(["build", "--out", str(tmp_path), "--platforms", PLATFORM]) == 1
+    captured = capsys.readouterr()
+    name = f"{PACKAGE}-{_version()}-linux_x64.zip"
+    assert f"{name} ({linux_mb:.1f} MB)" in captured.err
+    assert f"accepts up to {int(linux_mb) - 1} MB" in captured.err and "--python-versions" in captured.err
+    assert f"{linux_mb:.1f} MB  linux-x64" in captured.out  # every zip's size is printed before the failure
 
 
 def test_missing_wheel_names_package_platform_and_the_cache_option(tmp_path, monkeypatch):
