@@ -1,9 +1,9 @@
 """Blender side of the actor calibration: a copy of the user's rig and mesh with the actor's proportions
 applied, for inspection (the original is never touched). The engine computes the new bone heads and skin
-(core.proportions.scaled_body); this only writes them into Blender data."""
+(core.actor.proportions.scaled_body); this only writes them into Blender data."""
 import numpy as np
 
-from ..core.proportions import bone_factors, scaled_body
+from ..core.actor.proportions import bone_factors, scaled_body
 from .scene_bridge import body_from_blender, find_skinned_mesh
 
 

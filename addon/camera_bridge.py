@@ -1,4 +1,4 @@
-"""Blender camera objects <-> core Camera. Thin: the formulas live in core/camera.py.
+"""Blender camera objects <-> core Camera. Thin: the formulas live in core/capture/camera.py.
 
 Render resolution and pixel aspect are per *scene*, but each camera of a capture may have its own
 image size. Every camera object created here therefore keeps its own size and pixel aspect as
@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..core.camera import BlenderCameraParams, Camera, camera_from_blender, camera_to_blender
+from ..core.capture.camera import BlenderCameraParams, Camera, CameraError, camera_from_blender, camera_to_blender
 
 _RES_KEY = "mocap_resolution"
 _ASPECT_KEY = "mocap_pixel_aspect"
@@ -71,10 +71,10 @@ def activate_camera(scene, cam_obj) -> None:
 def camera_from_object(cam_obj, scene, name: str | None = None) -> Camera:
     """Read a Blender camera back as an OpenCV camera (zero distortion)."""
     if cam_obj.type != "CAMERA":
-        raise ValueError(f"object '{cam_obj.name}' is a {cam_obj.type}, not a camera; select a camera object")
+        raise CameraError(f"object '{cam_obj.name}' is a {cam_obj.type}, not a camera; select a camera object")
     data = cam_obj.data
     if data.type != "PERSP":
-        raise ValueError(f"camera '{cam_obj.name}' is {data.type}; only perspective cameras can be converted")
+        raise CameraError(f"camera '{cam_obj.name}' is {data.type}; only perspective cameras can be converted")
     render = scene.render
     if _RES_KEY in cam_obj:
         w, h = (int(v) for v in cam_obj[_RES_KEY])

@@ -63,7 +63,7 @@ class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
     def draw(self, context):
         props = context.scene.mocap
         layout = self.layout
-        layout.prop(props, "armature")
+        _draw_armature(layout, props, context)
         layout.operator("mocap.check_subject", icon="ARMATURE_DATA")
         if not props.subject_checked:
             return
@@ -73,6 +73,25 @@ class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
         if props.subject_problems:
             _wrapped(box, props.subject_problems, context, icon="ERROR", alert=not props.subject_dofs)
         _draw_calibration(layout.box(), props, context)
+
+
+def _draw_armature(layout, props, context):
+    """The Armature field, and while it is empty the armature tracking will use: the scene's only one, or a
+    request to pick one when there are several (tracking would stop there)."""
+    if props.armature is not None:
+        layout.prop(props, "armature")
+        return
+    armatures = [o.name for o in context.scene.objects if o.type == "ARMATURE"]
+    row = layout.row()
+    row.alert = len(armatures) > 1
+    row.prop(props, "armature")
+    if len(armatures) == 1:
+        layout.label(text=f"Tracks {armatures[0]}, the scene's only armature", icon="ARMATURE_DATA")
+    elif armatures:
+        _wrapped(layout, f"{len(armatures)} armatures in the scene ({', '.join(armatures)}): pick the one to "
+                         "track", context, icon="ERROR", alert=True)
+    else:
+        layout.label(text="No armature in the scene: add your rigged character", icon="INFO")
 
 
 def _draw_calibration(box, props, context):
@@ -86,11 +105,24 @@ def _draw_calibration(box, props, context):
         box.progress(factor=props.calibration_progress, type="BAR", text=props.calibration_status)
         box.label(text="Esc to cancel", icon="CANCEL")
     box.prop(props, "actor_file")
-    for line in props.actor_summary.splitlines():  # the body's choice and the masks' searches run long
-        _wrapped(box, line, context)
+    _draw_actor_summary(box, props, context)
     if props.actor_file:
         box.prop(props, "use_actor")
         box.operator("mocap.apply_actor_copy", icon="DUPLICATE")
+
+
+def _draw_actor_summary(layout, props, context):
+    """The fitted proportions, folded under their first line (the height): a dozen lines of lengths would push
+    the Track panel out of view."""
+    lines = props.actor_summary.splitlines()
+    if not lines:
+        return
+    header, body = layout.panel("MOCAP_actor_summary", default_closed=True)
+    header.label(text=f"Calibrated: {lines[0]}", icon="CHECKMARK")
+    if body is None:
+        return
+    for line in lines[1:]:  # the body's choice and the masks' searches run long
+        _wrapped(body, line, context)
 
 
 def _draw_measured_segments(layout, props):
@@ -126,6 +158,7 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         settings.prop(props, "refine")
         settings.prop(props, "smoothing_hz", text="Smoothing (Hz)")
         settings.prop(props, "backend")
+        settings.prop(props, "background")
         if props.backend_used:  # what the last Track chose (auto probes the GPU), wrapped: a label does not wrap
             _wrapped(settings, f"Using: {props.backend_used}", context, icon="INFO")
         settings.prop(props, "use_frame_range")
@@ -159,8 +192,9 @@ class MOCAP_PT_results(_MocapPanel, bpy.types.Panel):
     def draw(self, context):
         props = context.scene.mocap
         layout = self.layout
-        if props.frames_solved:
-            layout.label(text=f"{props.frames_solved} frames, {props.seconds_per_frame:.1f} s/frame", icon="TIME")
+        if props.frames_solved:  # a resumed take that only smoothed again timed no frame
+            pace = f", {props.seconds_per_frame:.1f} s/frame" if props.seconds_per_frame else ""
+            layout.label(text=f"{props.frames_solved} frames{pace}", icon="TIME")
         if props.last_output:
             layout.prop(props, "last_output", text="Folder")
         row = layout.row(align=True)

@@ -1,62 +1,41 @@
 """Scene settings of the add-on (`scene.mocap`): capture, subject, tracker settings, run state, results.
 
 Plain data only. The operators read these, call the engine, and write the outcome back here so
-the panels can show it. `tracking_settings()` is the one translation into the engine's settings.
+the panels can show it. The tracker's choices and their defaults come from core/tracking/options.py, and
+`tracking_settings()` translates them into the engine's settings as the command line does.
 """
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from ..core.smoothing import DEFAULT_CUTOFF_HZ
+from ..core.tracking.options import OPTIONS, settings_from_choices
+from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 
-ALGORITHMS = (
-    ("isa", "ISA", "Interacting simulated annealing: global optimisation with a particle set (the paper's best, default)"),
-    ("apf", "APF", "Annealed particle filter: layered annealing of a particle set"),
-    ("pf", "PF", "Particle filter: one weighting step over many particles (weakest, for comparison)"),
-    ("fsa", "FSA", "Fast simulated annealing: one hypothesis with Cauchy moves"),
-    ("icp", "ICP", "Local refinement against silhouette contours: fast, loses fast motion"),
-)
-
-LIKELIHOODS = (
-    ("silh+edge", "Silhouette + edges", "Binary silhouette overlap and image edges (the paper's best)"),
-    ("silh+edgech", "Silhouette + chamfer edges", "Binary silhouette overlap and distance to image edges"),
-    ("silhch+color", "Chamfer silhouette + colour", "Chamfer silhouette distance and per-part colour "
-                                                    "histograms (slowest, best on clothes with distinct colours)"),
-    ("silh", "Silhouette", "Binary silhouette overlap only"),
-    ("silhch", "Chamfer silhouette", "Chamfer silhouette distance only"),
-    ("lsilh+edge+kp", "Learned mask + edges + keypoints",
-     "Silhouette from the learned person mask, image edges and learned 2D body keypoints (default: robust to "
-     "changing light, clutter and people in the background)"),
-    ("lsilh+edge", "Learned mask + edges", "Silhouette from the learned person mask and image edges"),
-    ("silh+edge+kp", "Silhouette + edges + keypoints",
-     "Background-subtraction silhouette, image edges and learned 2D body keypoints"),
-    ("lsilh+kp", "Learned mask + keypoints", "Learned person mask and learned 2D body keypoints"),
-    ("kp", "Keypoints", "Learned 2D body keypoints only (with the anatomical prior)"),
-)
-
-PRESETS = (
-    ("full", "Full", "The paper's budget (200 particles x 15 iterations) and the local fit on finer silhouettes"),
-    ("preview", "Preview", "A quick look at a take: 50 particles x 4 iterations and the local fit at the search's "
-                           "resolution, several times faster (README, 'Speed')"),
-)
+# The Track panel's choices, from core/tracking/options.py (the command line's come from there too)
+ALGORITHMS = OPTIONS["algorithm"].enum_items()
+LIKELIHOODS = OPTIONS["likelihood"].enum_items()
+PRESETS = OPTIONS["preset"].enum_items()
+BACKENDS = OPTIONS["backend"].enum_items()
 
 
 def _apply_preset(props, context):
     """Show the preset's search budget in the Particles / Iterations fields (they stay editable)."""
-    from ..core.tracking import TrackingSettings
+    from ..core.tracking.settings import TrackingSettings
 
     settings = TrackingSettings.preset(props.preset)
     props.particles, props.iterations = settings.particles, settings.iterations
 
 
-BACKENDS = (
-    ("auto", "Auto", "The GPU (GLSL) on a hardware GPU, else the fast compiled CPU path, else NumPy; "
-                     "the GPU is probed in a separate process first"),
-    ("numpy", "NumPy", "Reference implementation: slow, always available"),
-    ("fast", "Fast", "Compiled CPU rasteriser (numba)"),
-    ("gpu", "GPU", "GLSL likelihood on the GPU through Blender's gpu module (tracking then runs in the "
-                   "foreground: the GPU is reachable only from Blender's main thread)"),
-)
+def _enum(name, **kwargs):
+    option = OPTIONS[name]
+    return EnumProperty(name=option.label, items=option.enum_items(), default=option.default,
+                        description=option.description, **kwargs)
+
+
+def _number(name, prop, **kwargs):
+    option = OPTIONS[name]
+    return prop(name=option.label, default=option.default, description=option.description, **kwargs)
+
 
 UNITS = (
     ("auto", "Auto", "Use the unit written in the calibration file (metres when it says nothing)"),
@@ -68,7 +47,7 @@ UNITS = (
 CAMERA_COLLECTION = "Mocap Cameras"
 
 
-# Where each segment a user can measure starts and ends on the actor (the rig's joints, core/proportions.py)
+# Where each segment a user can measure starts and ends on the actor (the rig's joints, core/actor/proportions.py)
 MEASURED_SEGMENTS = (
     ("spine", "Spine", "from the pelvis, between the hip joints, to the base of the neck"),
     ("neck", "Neck", "from the base of the neck to the base of the skull"),
@@ -120,7 +99,7 @@ class MocapSettings(bpy.types.PropertyGroup):
                                 subtype="DISTANCE", unit="LENGTH",
                                 description="The actor's height if you have measured it: the calibrated body is "
                                             "scaled to it (0: as the footage gives it)")
-    # the footage reads some lengths only within 5-10 % (README, "Actor calibration"); a tape measure's win
+    # the footage reads some lengths only within 5-10 % (docs/actor-calibration.md); a tape measure's win
     actor_spine: _measured_length("spine")
     actor_neck: _measured_length("neck")
     actor_shoulder_width: _measured_length("shoulder_width")
@@ -139,25 +118,20 @@ class MocapSettings(bpy.types.PropertyGroup):
                                         "rotations (root path rescaled to the rig)")
 
     # ---- tracker
-    algorithm: EnumProperty(name="Algorithm", items=ALGORITHMS, default="isa")
-    likelihood: EnumProperty(name="Likelihood", items=LIKELIHOODS, default="lsilh+edge+kp",
-                             description="Image cues the pose is scored against")
-    preset: EnumProperty(name="Preset", items=PRESETS, default="full", update=_apply_preset,
-                         description="Speed against accuracy: Full for the final take, Preview for a quick look")
-    particles: IntProperty(name="Particles", default=200, min=1, soft_max=2000,
-                           description="Pose hypotheses per iteration (the budget per frame is particles x iterations)")
-    iterations: IntProperty(name="Iterations", default=15, min=1, soft_max=100,
-                            description="Annealing iterations / layers per frame")
-    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: the same seed repeats the same result")
-    refine: BoolProperty(name="Refine Locally", default=True,
-                         description="After the search, fit the silhouette outlines locally (ICP): "
-                                     "less jitter, about a second more per frame")
+    algorithm: _enum("algorithm")
+    likelihood: _enum("likelihood")
+    preset: _enum("preset", update=_apply_preset)
+    particles: _number("particles", IntProperty, min=1, soft_max=2000)
+    iterations: _number("iterations", IntProperty, min=1, soft_max=100)
+    seed: _number("seed", IntProperty, min=0)
+    refine: BoolProperty(name=OPTIONS["refine"].label, default=OPTIONS["refine"].default == "icp",
+                         description=OPTIONS["refine"].choices[0].description)
     smoothing_hz: FloatProperty(name="Smoothing", default=DEFAULT_CUTOFF_HZ, min=0.0, soft_max=12.0, precision=1,
                                 description="When the take is solved, low-pass its motion at this many Hz (less "
                                             "jitter; 0: keep every frame as solved). The solved poses stay in "
                                             "joints_raw.npz / poses_raw.npz in the output folder")
-    backend: EnumProperty(name="Backend", items=BACKENDS, default="auto",
-                          description="How poses are rendered and compared with the images")
+    backend: _enum("backend")
+    background: _enum("background")
     use_frame_range: BoolProperty(name="Limit Frames", default=False,
                                   description="Track only a range of capture frames (otherwise all of them)")
     frame_start: IntProperty(name="First", default=0, min=0, description="First capture frame to track (0-based)")
@@ -192,16 +166,15 @@ class MocapSettings(bpy.types.PropertyGroup):
         if not self.use_frame_range:
             return None
         if self.frame_end < self.frame_start:
-            raise ValueError(f"the last frame ({self.frame_end}) is before the first ({self.frame_start}); "
+            from ..core.errors import InputError
+
+            raise InputError(f"the last frame ({self.frame_end}) is before the first ({self.frame_start}); "
                              f"fix the frame range in the Track panel")
         return range(self.frame_start, self.frame_end + 1)
 
     def tracking_settings(self):
-        from ..core.tracking import TrackingSettings
-
-        return TrackingSettings.preset(self.preset, algorithm=self.algorithm, likelihood=self.likelihood,
-                                       particles=self.particles, iterations=self.iterations, seed=self.seed,
-                                       backend=self.backend, refine="icp" if self.refine else "none")
+        """The engine's settings for the panel's choices: the same translation as the command line's."""
+        return settings_from_choices(self)
 
 
 classes = (MocapSettings,)

@@ -5,11 +5,12 @@ The only place that translates between Blender data and the engine's plain array
 """
 import numpy as np
 
-from ..core.body import Skeleton, build_body
-from ..core.rig_checks import require_person_height, require_skin_weights, standing_height
+from ..core.body.model import Skeleton, build_body
+from ..core.body.rig_checks import require_person_height, require_skin_weights, standing_height
+from ..core.errors import InputError
 
 
-class SubjectError(ValueError):
+class SubjectError(InputError):
     """The scene does not hold a usable armature + skinned mesh."""
 
 

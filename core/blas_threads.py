@@ -3,9 +3,8 @@
 NumPy's and SciPy's wheels bundle OpenBLAS, which splits even the local fit's small products and solves
 (30 x 30 systems, 2000 x 30 Jacobians) over every core and then spins waiting for them. The tracker already
 keeps both cores busy (the numba rasteriser's threads, the next frame's landmark model in a worker thread),
-so those BLAS threads only contend: measured on busy (preview preset, load 4), the local fit took 0.54 s per
-frame with OpenBLAS's default threads and 0.34 s with one. Best effort: where no OpenBLAS is found (another
-BLAS, an unusual NumPy build) nothing changes.
+so those BLAS threads only contend: with one, the local fit takes about a third less time (docs/defaults.md,
+"blas_threads"). Best effort: where no OpenBLAS is found (another BLAS, an unusual NumPy build) nothing changes.
 """
 import contextlib
 import ctypes

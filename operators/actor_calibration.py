@@ -1,6 +1,5 @@
 """Calibrate the actor: track the first frames with the user's rig, fit the proportions to their landmarks,
 save actor.json. Shared by `calibrate`, `track --calibrate` and the Calibrate button (Subject panel)."""
-import traceback
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +21,7 @@ def calibrate_actor(scene, armature, capture_dir, out_dir, settings=None, frames
     proportions to the landmarks, then (silhouettes=True) refine them against the person masks of the same
     frames, apply the lengths the user measured ({segment or "height": metres}), write OUT/actor.json.
     Returns (ProportionsFit, path of actor.json)."""
-    from ..core.measured_lengths import with_measured
+    from ..core.actor.measured_lengths import with_measured
 
     session = open_calibration(scene, armature, capture_dir, out_dir, settings, frames, log, step)
     fit = with_measured(fit_calibration(session, log, progress, symmetric, silhouettes), session.character,
@@ -43,7 +42,7 @@ def open_calibration(scene, armature, capture_dir, out_dir, settings=None, frame
         session.all_frames = session.frames = calibration_frames(session.all_frames)
         try:
             require_enough_frames(session.frames, capture_dir)  # a take shorter than that
-        except ValueError:
+        except Exception:
             session.capture.close()
             raise
     return session
@@ -51,20 +50,21 @@ def open_calibration(scene, armature, capture_dir, out_dir, settings=None, frame
 
 def require_enough_frames(frames, capture_dir):
     """Too few frames to calibrate on: the user's range (or a very short take), said before anything is tracked."""
-    from ..core.proportions_fit import MIN_FRAMES
+    from ..core.actor.landmark_fit import MIN_FRAMES, ProportionsFitError
 
     if len(frames) < MIN_FRAMES:
         given = ("none" if not frames else f"1 (frame {frames[0]})" if len(frames) == 1
                  else f"{len(frames)} (frames {frames[0]}-{frames[-1]})")
-        raise ValueError(f"the calibration needs at least {MIN_FRAMES} frames; it was given {given} of {capture_dir}: "
-                         f"choose a longer range; {DEFAULT_FRAMES} frames (the default) measure the lengths best")
+        raise ProportionsFitError(f"the calibration needs at least {MIN_FRAMES} frames; it was given {given} of "
+                                  f"{capture_dir}: choose a longer range; {DEFAULT_FRAMES} frames (the default) "
+                                  "measure the lengths best")
 
 
 def fit_calibration(session, log=None, progress=None, symmetric=True, silhouettes=True):
     """Any thread (no bpy): track the session's frames (not keyed: the rig keeps the user's animation), fit the
     proportions to their landmarks, refine them against the person masks; closes the capture. Returns the
     ProportionsFit, or None when the session was cancelled first."""
-    from ..core.proportions_fit import fit_proportions
+    from ..core.actor.landmark_fit import ProportionsFitError, fit_proportions
 
     log = log or (lambda msg: None)
     try:
@@ -75,14 +75,14 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
             return None
         est = session.writer.estimates
         if not est or est[0].landmarks is None:
-            raise ValueError("calibration needs the learned landmarks: track with a likelihood that has 'kp' "
-                             "(the default lsilh+edge+kp)")
+            raise ProportionsFitError("calibration needs the learned landmarks: track with a likelihood that has "
+                                      "'kp' (the default lsilh+edge+kp)")
         landmarks = np.array([e.landmarks for e in est])
         visibility = np.array([e.landmark_visibility for e in est])
         fit = fit_proportions(session.character, session.capture.cameras, landmarks, visibility,
                               np.array([e.pose for e in est]), frames=[e.frame for e in est], symmetric=symmetric)
         if silhouettes:
-            from ..core.proportions_silhouette import calibration_targets, refine_fit
+            from ..core.actor.silhouette_fit import calibration_targets, refine_fit
 
             log("calibration: refining the proportions against the person masks")
             used = [[e.frame for e in est].index(f) for f in fit.frames]
@@ -100,8 +100,8 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
 def _chosen_body(fit, session, targets, rig_poses, log):
     """The fit's segments taken halfway (the trunk/leg split and the hip width set by the person masks; the rig
     scaled to the masks' height where the landmarks misread it), or the rig's own proportions where they match the
-    masks better (core/calibration_check.py)."""
-    from ..core.calibration_check import compare_bodies, keep_chosen
+    masks better (core/actor/body_choice.py)."""
+    from ..core.actor.body_choice import compare_bodies, keep_chosen
 
     log("calibration: the spine/thigh split, the hip width, the height and the choice between the rig and the "
         "calibrated body, against the person masks")
@@ -121,7 +121,7 @@ def _mismatches(mismatch):
 
 def save_calibration(fit, out_dir, subject_name, capture_dir):
     """OUT/actor.json of the fit; returns its path."""
-    from ..core.actor_file import save_actor
+    from ..core.actor.actor_file import save_actor
 
     return save_actor(Path(out_dir) / "actor.json", fit, subject_name=subject_name,
                       capture=Path(capture_dir).resolve())
@@ -131,6 +131,7 @@ class CalibrationJob(WorkerJob):
     """The Calibrate button's run in a worker thread, as TrackJob runs Track (operators/worker_job.py): the
     worker only calls fit_calibration. Esc cancels after the frame being solved; nothing is saved then."""
     thread_name = "mocap-calibrate"
+    doing = "The calibration"
 
     def __init__(self, session, n_frames):
         super().__init__()
@@ -147,12 +148,6 @@ class CalibrationJob(WorkerJob):
         fit = fit_calibration(self.session, log=lambda msg: self.queue.put(("status", str(msg))),
                               progress=lambda est: self.queue.put(("frame", est.frame)))
         self.queue.put(("fit", fit))
-
-    def describe_failure(self, exc):
-        if isinstance(exc, (ValueError, OSError)):  # bad input: the message names the problem and the fix
-            return str(exc), ""
-        return (f"Calibration failed unexpectedly ({type(exc).__name__}: {exc}); see the system console and "
-                "report it", traceback.format_exc())
 
     # ---- messages, on the main thread
     def on_frame(self, _frame):
@@ -182,7 +177,7 @@ class CalibrationJob(WorkerJob):
 
 def describe(fit):
     """The fitted height and segment lengths, one line each (for the terminal and the panel)."""
-    from ..core.measured_lengths import FOOTAGE_MISS_PERCENT
+    from ..core.actor.measured_lengths import FOOTAGE_MISS_PERCENT
 
     L, S = fit.lengths, fit.subject_lengths
     measured = fit.measured or {}
@@ -231,7 +226,7 @@ def _how_known(segment, measured, miss_percent):
 def _searched_by_masks(check):
     """One line per length the person masks were searched for (the trunk/leg split, the hip width): what they set,
     or that they did not pin it down."""
-    from ..core.mask_line_search import pinned_down
+    from ..core.actor.mask_line_search import pinned_down
 
     lines = []
     split, hips = check.get("split"), check.get("hip_width")
@@ -249,9 +244,9 @@ def _searched_by_masks(check):
 
 
 def _height_by_masks(check):
-    """The line on where the person masks put the height (core/height_by_masks.py), if they were asked."""
-    from ..core.height_by_masks import GATE
-    from ..core.mask_line_search import pinned_down
+    """The line on where the person masks put the height (core/actor/height_by_masks.py), if they were asked."""
+    from ..core.actor.height_by_masks import GATE
+    from ..core.actor.mask_line_search import pinned_down
 
     height = check.get("height")
     if not height:

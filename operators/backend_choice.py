@@ -3,7 +3,7 @@
 The GPU path is probed in a subprocess first: a missing EGL or Mesa library aborts the whole process
 (not a Python exception), so it must not happen in the process that tracks. `auto` takes the GPU only
 when the probe finds a hardware GPU: on a software rasteriser (Mesa's llvmpipe, what these CPU machines
-have) the GLSL path runs on the same cores as the numba path and is far slower (README, "The GLSL path").
+have) the GLSL path runs on the same cores as the numba path and is far slower (docs/speed.md, the GPU path).
 """
 from __future__ import annotations
 

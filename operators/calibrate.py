@@ -1,10 +1,10 @@
 """The Calibrate step of the Subject panel: fit the actor's proportions on the first frames, show them,
 apply them to a copy of the rig for inspection. Tracking then uses the calibration (Track with Calibration)."""
-import traceback
 from pathlib import Path
 
 import bpy
 
+from .failures import user_message
 from .modal_run import begin_modal, end_modal, is_cancel_key, show_status
 
 
@@ -21,7 +21,7 @@ def _measured(props):
     """The lengths measured on the actor that the panel holds ({"height" or segment: metres}), those set (> 0);
     a MeasuredLengthError naming the field of one that is no length of a person."""
     from ..addon.properties import MEASURED_SEGMENTS
-    from ..core.measured_lengths import MeasuredLengthError, checked_length
+    from ..core.actor.measured_lengths import MeasuredLengthError, checked_length
 
     fields = [("height", "actor_height")] + [(key, f"actor_{key}") for key, _label, _where in MEASURED_SEGMENTS]
     measured = {}
@@ -83,7 +83,6 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
 
     # ---- synchronous: background mode, scripts, tests, the GPU backend (bpy's gpu works on the main thread only)
     def execute(self, context):
-        from ..core.proportions_fit import ProportionsFitError
         from .actor_calibration import calibrate_actor
 
         props = context.scene.mocap
@@ -91,12 +90,8 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             armature, capture_dir, out_dir, settings = self._inputs(context)
             fit, path = calibrate_actor(context.scene, armature, capture_dir, out_dir, settings,
                                         frames=_calibration_frames(props), measured=_measured(props))
-        except (ValueError, ProportionsFitError, FileNotFoundError, OSError) as exc:
-            return self._fail(context, str(exc))
-        except Exception as exc:
-            traceback.print_exc()
-            return self._fail(context, f"Calibration failed unexpectedly ({type(exc).__name__}: {exc}); "
-                                       "see the system console and report it")
+        except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+            return self._fail(context, user_message(exc, "The calibration"))
         return self._show_result(context, fit, path)
 
     # ---- modal: the UI stays responsive while the worker tracks the calibration frames and fits
@@ -113,12 +108,8 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             frames = _calibration_frames(props)
             self._measured = _measured(props)  # checked before anything is tracked
             session = open_calibration(context.scene, armature, capture_dir, out_dir, settings, frames=frames)
-        except (ValueError, FileNotFoundError, OSError) as exc:
-            return self._fail(context, str(exc))
-        except Exception as exc:
-            traceback.print_exc()
-            return self._fail(context, f"Could not start the calibration ({type(exc).__name__}: {exc}); "
-                                       "see the system console")
+        except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+            return self._fail(context, user_message(exc, "Starting the calibration"))
         self._job = CalibrationJob(session, len(session.frames))
         self._save_args = (out_dir, armature.name, capture_dir)
         props.last_error = ""
@@ -156,13 +147,13 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         if job.fit is None:  # cancelled before the fit
             self.report({"WARNING"}, f"Calibration cancelled after {job.solved} frames; nothing saved")
             return {"CANCELLED"}
-        from ..core.measured_lengths import with_measured
+        from ..core.actor.measured_lengths import with_measured
 
         fit = with_measured(job.fit, job.session.character, self._measured)
         try:
             path = save_calibration(fit, *self._save_args)
-        except OSError as exc:
-            return self._fail(context, f"could not save the calibration: {exc}")
+        except Exception as exc:  # noqa: BLE001
+            return self._fail(context, f"could not save the calibration: {user_message(exc, 'Saving it')}")
         return self._show_result(context, fit, path)
 
     def cancel(self, context):
@@ -183,20 +174,22 @@ class MOCAP_OT_apply_actor_copy(bpy.types.Operator):
 
     def execute(self, context):
         from ..addon.actor_bridge import apply_proportions_to_copy
-        from ..core.actor_file import load_actor, proportions_for_body
+        from ..core.actor.actor_file import load_actor, proportions_for_body
         from ..addon.scene_bridge import body_from_blender
         from .setup_subject import subject_armature
+
+        from ..core.errors import InputError
 
         props = context.scene.mocap
         try:
             if not props.actor_file:
-                raise ValueError("no actor calibration yet: press Calibrate Actor first (or load an actor.json)")
+                raise InputError("no actor calibration yet: press Calibrate Actor first (or load an actor.json)")
             data = load_actor(bpy.path.abspath(props.actor_file))
             armature = subject_armature(context)
             proportions = proportions_for_body(data, body_from_blender(armature, None, context.scene))
             arm_copy, _ = apply_proportions_to_copy(context.scene, armature, proportions)
-        except ValueError as exc:
-            self.report({"ERROR"}, str(exc))
+        except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+            self.report({"ERROR"}, user_message(exc, "Applying the calibration to a copy"))
             return {"CANCELLED"}
         self.report({"INFO"}, f"{arm_copy.name}: the rig with the actor's proportions "
                               f"(height {data['height_m']:.3f} m)")

@@ -2,7 +2,9 @@
 
 Each sub-command lives in its own module (operators/cmd_<name>.py) exposing
 `add_arguments(parser)` and `run(args) -> int`; this file only dispatches, importing the
-module lazily so `--help` stays fast and one broken command cannot break the others.
+module lazily so `--help` stays fast and one broken command cannot break the others. An exception a command
+lets through ends it with the user's message (exit 2) or, for a bug, a message saying so (exit 70;
+operators/failures.py).
 """
 import argparse
 import importlib
@@ -12,7 +14,8 @@ COMMANDS = {
     "demo": "track the bundled sample scene and print its error against the ground truth",
     "track": "track a capture with a rigged subject and write the result folder",
     "calibrate": "fit the actor's proportions (height, segment lengths) from the first frames; saves actor.json",
-    "evaluate": "score a result folder: against ground-truth joints (3D error, PCK, plot) or, without them, against the learned evidence; contact sheet of the overlays",
+    "evaluate": "score a result folder: against ground-truth joints (3D error, PCK, plot) or, without them, against "
+                "the learned evidence; contact sheet of the overlays",
     "compare": "run every optimiser on a capture at the same budget (the paper's Table 3)",
     "bench": "print speed figures of the likelihood engine (reference vs fast path)",
     "build": "build the installable extension zip with bundled wheels",
@@ -52,7 +55,12 @@ def main(argv=None):
     if getattr(args, "_unavailable", None):
         print(f"markerless_mocap: the '{args.command}' command is not part of this build yet", file=sys.stderr)
         return 2
-    return int(args._run(args) or 0)
+    try:
+        return int(args._run(args) or 0)
+    except Exception as exc:  # noqa: BLE001  (what a command did not report itself: the user's error or a bug)
+        from .failures import cli_failure
+
+        return cli_failure(args.command, exc)
 
 
 def blender_command(argv):

@@ -35,13 +35,17 @@ def add_arguments(parser):
                         help="capture folder whose first frame gives the observation (default: the walk sample; "
                              "synthetic cameras if it cannot be loaded)")
     parser.add_argument("--poses", type=int, default=200, help="poses per batch (default 200)")
-    parser.add_argument("--likelihood", default="silh+edge", help="likelihood name (default silh+edge)")
+    from ..core.tracking.options import OPTIONS
+
+    parser.add_argument("--likelihood", default="silh+edge", choices=OPTIONS["likelihood"].values,
+                        help="likelihood name (default silh+edge)")
     parser.add_argument("--scale", type=float, default=None,
                         help="energy resolution as a fraction of the capture's (default: the engine's)")
     parser.add_argument("--reference-poses", type=int, default=4,
                         help="poses the slow reference path is timed on, then scaled to --poses (default 4)")
     parser.add_argument("--repeats", type=int, default=7, help="timed repeats; the fastest counts (default 7)")
-    parser.add_argument("--backend", default="auto", choices=["auto", "fast", "numpy"],
+    # the CPU path timed against the reference; the GPU's figures come with the pipeline's when its probe passes
+    parser.add_argument("--backend", default="auto", choices=[b for b in OPTIONS["backend"].values if b != "gpu"],
                         help="backend timed as the fast path (default auto)")
     parser.add_argument("--pipeline-frames", type=int, default=2,
                         help="frames of the default pipeline timed per backend after the start frame (default 2; "
@@ -71,7 +75,7 @@ def _best(fn, repeats):
 
 def ring_cameras(centre, n=4, radius=3.5, height=0.3, focal=550.0, size=(640, 480)):
     """n OpenCV cameras on a circle around `centre` (world Z up), all looking at it."""
-    from ..core.camera import Camera
+    from ..core.capture.camera import Camera
 
     cams = []
     for i in range(n):
@@ -91,7 +95,7 @@ def load_body(subject):
     import bpy
 
     from ..addon.scene_bridge import body_from_blender, find_armature
-    from ..core.proxy import make_proxy
+    from ..core.body.proxy import make_proxy
 
     if not Path(subject).is_file():
         raise FileNotFoundError(f"subject file {subject} does not exist: generate the sample scene "
@@ -106,7 +110,7 @@ def _capture_scene(folder, body, scale):
     """(cameras, first-frame features, pose near the subject) from a capture folder, or None."""
     try:
         from ..core.capture.capture import load_capture
-        from ..core.features import BackgroundModel, compute_view_features
+        from ..core.evidence import BackgroundModel, compute_view_features
 
         capture = load_capture(folder)
         if not capture.backgrounds or len(capture.backgrounds) != len(capture.cameras):
@@ -133,8 +137,8 @@ def _capture_scene(folder, body, scale):
 def _learned_evidence_seconds(capture_dir, cameras, body, pose, repeats):
     """Seconds per frame of the learned evidence for every view: crops around the pose, one batched
     forward pass, landmarks and masks back in image pixels (the capture's frame 0, else grey images)."""
-    from ..core.evidence_crops import crops_around
-    from ..core.features.learned import LandmarkModel, locate
+    from ..core.evidence.crops import crops_around
+    from ..core.evidence.learned import LandmarkModel, locate
 
     images = None
     if capture_dir and Path(capture_dir).is_dir():
@@ -171,7 +175,8 @@ def _pipeline_seconds(body, capture_dir, backend, n_frames, particles, iteration
     fit; or another preset's, its own budget where particles/iterations are None) on `backend`, tracked from
     the ground truth's pose at frame 0, timed over frames 2..n_frames + 1."""
     from ..core.capture.capture import load_capture
-    from ..core.tracking import Tracker, TrackingSettings
+    from ..core.tracking.settings import TrackingSettings
+    from ..core.tracking.tracker import Tracker
     from .cmd_compare import true_first_pose
     from .track_session import build_motion_models
 
@@ -197,7 +202,7 @@ def _pipeline_seconds(body, capture_dir, backend, n_frames, particles, iteration
 def backend_table(body, proxy, cameras, feats, observed, poses, args):
     """Per backend: evaluations per second (poses x views per batch) and seconds per frame of the default
     pipeline. Returns {backend: figures} and the backend auto picks."""
-    from ..core import likelihood as lk
+    from ..core.energy import likelihood as lk
     from .backend_choice import choose_backend
 
     backends = ["numpy", "fast"]
@@ -219,7 +224,8 @@ def backend_table(body, proxy, cameras, feats, observed, poses, args):
         model.set_frame(feats)
         batch = poses if backend != "numpy" else poses[:min(args.reference_poses, len(poses))]
         model(batch)  # warm up (JIT, shaders)
-        wall = _best(lambda: model(batch), max(1, min(3, args.repeats)) if backend == "numpy" else args.repeats)
+        wall = _best(lambda model=model, batch=batch: model(batch),
+                     max(1, min(3, args.repeats)) if backend == "numpy" else args.repeats)
         cpu0 = time.process_time()
         model(batch)
         cpu = time.process_time() - cpu0
@@ -233,7 +239,7 @@ def backend_table(body, proxy, cameras, feats, observed, poses, args):
             row["pipeline_evaluations_per_frame"] = evals
         table[backend] = row
     base = table["numpy"]
-    for backend, row in table.items():
+    for row in table.values():
         row["evaluations_vs_numpy"] = round(row["evaluations_per_s"] / base["evaluations_per_s"], 2)
         if "pipeline_s_per_frame" in row:
             row["pipeline_vs_numpy"] = round(base["pipeline_s_per_frame"] / row["pipeline_s_per_frame"], 2)
@@ -250,14 +256,14 @@ def backend_table(body, proxy, cameras, feats, observed, poses, args):
 
 
 def fast_scale(args):
-    from ..core import likelihood as lk
+    from ..core.energy import likelihood as lk
 
     return lk.ENERGY_SCALE if args.scale is None else args.scale
 
 
 def synthetic_features(model, pose):
-    from ..core.features.view_features import ViewFeatures, distance_to_mask
-    from ..core.features.view_features import EDGE_DT_CAP_PX
+    from ..core.evidence.view_features import ViewFeatures, distance_to_mask
+    from ..core.evidence.view_features import EDGE_DT_CAP_PX
 
     feats = []
     for v in range(len(model.cameras)):
@@ -270,9 +276,9 @@ def synthetic_features(model, pose):
 
 
 def run(args):
-    from ..core import likelihood as lk
+    from ..core.energy import likelihood as lk
     from ..core import render
-    from ..core.features import edge_enhancing_diffusion
+    from ..core.evidence import edge_enhancing_diffusion
 
     if args.poses < 1 or args.reference_poses < 1 or args.repeats < 1:
         print("bench: --poses, --reference-poses and --repeats must be at least 1", file=sys.stderr)
@@ -356,8 +362,9 @@ def run(args):
     print(json.dumps({**table, "auto_backend": auto_backend, "default_s_per_frame": default,
                       "preview_s_per_frame": None if preview is None else round(preview, 3),
                       "load_average": [round(x, 2) for x in os.getloadavg()],
-                      "learned_evidence_s": round(learned, 4), "reference_s": round(ref, 4), "fast_s": round(fast, 4), "ratio": round(ref / fast, 2),
-                      "fk_lbs_s": round(fk, 4), "diffusion_vga_s": round(diffusion, 4), "fast_cpu_s": round(fast_cpu, 4), "poses": args.poses, "views": len(cameras),
+                      "learned_evidence_s": round(learned, 4), "reference_s": round(ref, 4), "fast_s": round(fast, 4),
+                      "ratio": round(ref / fast, 2), "fk_lbs_s": round(fk, 4), "diffusion_vga_s": round(diffusion, 4),
+                      "fast_cpu_s": round(fast_cpu, 4), "poses": args.poses, "views": len(cameras),
                       "resolution": f"{w}x{h}", "backend": backend, "likelihood": args.likelihood,
                       "reference_poses_timed": n_ref, "energies_agree": bool(agree), "threads": _threads(),
                       "render_backends": list(render.BACKENDS)}))

@@ -2,7 +2,7 @@
 import sys
 from pathlib import Path
 
-from ..core.measured_lengths import MEASURABLE
+from ..core.actor.measured_lengths import MEASURABLE
 from .cmd_track import StepPrinter, add_tracking_options, open_subject, parse_frames, settings_from_args
 
 
@@ -26,13 +26,11 @@ def add_arguments(p):
 
 
 def run(args):
-    from ..addon.scene_bridge import SubjectError, find_armature
-    from ..core.measured_lengths import MeasuredLengthError, parse_measured
-    from ..core.proportions_fit import ProportionsFitError
-    from ..core.render import BackendUnavailableError
-    from ..core.results import ResultWriteError
+    from ..addon.scene_bridge import find_armature
+    from ..core.actor.measured_lengths import MeasuredLengthError, parse_measured
     from .actor_calibration import calibrate_actor, describe
     from .backend_choice import choose_backend
+    from .failures import USER_ERRORS, cli_failure
 
     try:
         measured = parse_measured(args.measured)
@@ -47,10 +45,8 @@ def run(args):
                                     frames=parse_frames(args.frames), log=lambda m: print(m, file=sys.stderr),
                                     step=StepPrinter(), symmetric=not args.asymmetric,
                                     silhouettes=not args.landmarks_only, measured=measured)
-    except (SubjectError, ProportionsFitError, ValueError, FileNotFoundError, ResultWriteError,
-            BackendUnavailableError) as exc:
-        print(f"markerless_mocap calibrate: {exc}", file=sys.stderr)
-        return 2
+    except USER_ERRORS as exc:  # the capture, the rig, the frames, the backend, the folders: the message names the fix
+        return cli_failure("calibrate", exc)
     for line in describe(fit):
         print(line)
     print(f"saved {path}; track later takes with --actor {path}", file=sys.stderr)

@@ -13,9 +13,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..core.evaluation import joint_errors, summarise
-from ..core.results import ResultWriter
-from ..core.tracking import Tracker, TrackingSettings, run_tracker
+from ..core.results.evaluation import joint_errors, summarise
+from ..core.results.result_folder import ResultWriter
+from ..core.tracking.options import OPTIONS
+from ..core.tracking.settings import TrackingSettings
+from ..core.tracking.tracker import Tracker, run_tracker
 from .cmd_track import Progress, open_subject, parse_frames
 
 class Row(NamedTuple):
@@ -41,7 +43,7 @@ DEFAULT_ROWS = (
     Row("ISA (s+e)", "isa", "silh+edge"),
     Row("ISA (s+e)", "isa", "silh+edge", split="half"),
     Row("ISA + ICP refinement (s+e)", "isa", "silh+edge", "icp"),
-    # Learned evidence (core/features/learned.py): the learned person mask for the silhouette, and 2D keypoints.
+    # Learned evidence (core/evidence/learned.py): the learned person mask for the silhouette, and 2D keypoints.
     Row("ISA (ls+e+kp)", "isa", "lsilh+edge+kp"),
     Row("ISA + ICP refinement (ls+e+kp)", "isa", "lsilh+edge+kp", "icp"),
 )
@@ -59,7 +61,7 @@ def add_arguments(p):
     p.add_argument("--rows", help="subset of rows by algorithm:likelihood, e.g. isa:silh+edge,apf:silhch+color; "
                                   "isa+icp:silh+edge adds the local ICP refinement; isa:silh+edge@100x30 runs "
                                   "100 particles x 30 iterations (the same budget, split differently)")
-    p.add_argument("--backend", default="auto", choices=("auto", "numpy", "fast", "gpu"),
+    p.add_argument("--backend", default=OPTIONS["backend"].default, choices=OPTIONS["backend"].values,
                    help="likelihood backend, as for track (auto: gpu on a hardware GPU, else fast)")
     p.add_argument("--start", choices=("search", "learned", "truth"), default="search",
                    help="common initial pose: a global search on the first frame with silhouettes and edges "
@@ -152,7 +154,7 @@ def run(args):
             print(f"== {label}, seed {seed}", file=sys.stderr)
             t0 = time.perf_counter()
 
-            def on_frame(est):
+            def on_frame(est, writer=writer, progress=progress):
                 writer.add(est)
                 progress(est)
 
@@ -176,8 +178,8 @@ def run(args):
 
 
 def true_first_pose(body, truth, frame):
-    from ..core.pose_fitting import poses_from_joints
-    from ..core.results import load_joints
+    from ..core.body.pose_fit import poses_from_joints
+    from ..core.results.result_folder import load_joints
 
     names, truth_frames, positions = load_joints(truth)
     if frame not in truth_frames:
@@ -185,7 +187,7 @@ def true_first_pose(body, truth, frame):
     try:
         poses, _ = poses_from_joints(body, names, positions[list(truth_frames).index(frame)][None])
     except ValueError as error:
-        raise SystemExit(f"--start truth: {error}")
+        raise SystemExit(f"--start truth: {error}") from None
     return poses[0]
 
 

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..core.tracking import TrackingSettings
+from ..core.tracking.settings import TrackingSettings
 from .cmd_evaluate import evaluate
 from .cmd_track import Progress, StepPrinter, open_subject, run_session
 

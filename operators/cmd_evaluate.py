@@ -1,12 +1,13 @@
 """`evaluate`: a result folder against ground-truth joints, or, without ground truth (real footage),
 against the learned evidence found afresh around its poses; optionally a contact sheet of the overlays."""
 import json
-import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from ..core.evaluation import EVAL_JOINTS, EvaluationError, joint_errors, plot_per_frame, summarise
+from ..core.results.evaluation import EVAL_JOINTS, EvaluationError, joint_errors, plot_per_frame, summarise
+from .failures import USER_ERRORS, cli_failure
 
 
 def add_arguments(p):
@@ -49,7 +50,7 @@ def _print_truth(args):
 def _print_triangulation(args):
     """The same joints from the result and from triangulating its landmarks alone (needs --capture)."""
     from ..core.capture.capture import load_capture
-    from ..core.evaluation import triangulation_errors
+    from ..core.results.evaluation import triangulation_errors
 
     keypoints = Path(args.result) / "keypoints.npz"
     if not keypoints.is_file():
@@ -69,8 +70,12 @@ def _print_triangulation(args):
 
 
 def _load_result(result_dir):
-    with np.load(Path(result_dir) / "poses.npz") as d:
-        return d["frames"].astype(np.int64), d["poses"]
+    path = Path(result_dir) / "poses.npz"
+    try:
+        with np.load(path) as d:
+            return d["frames"].astype(np.int64), d["poses"]
+    except (ValueError, KeyError, zipfile.BadZipFile) as exc:  # numpy's words for a file that is not a result's
+        raise EvaluationError(f"{path} is not the poses.npz of a result folder ({exc})") from exc
 
 
 def _subject(args):
@@ -81,16 +86,16 @@ def _subject(args):
     body = body_from_blender(find_armature(scene), None, scene)
     actor_file = Path(args.result) / "actor.json"
     if actor_file.is_file():  # tracked with an actor calibration: the poses are the actor body's
-        from ..core.actor_file import actor_body, load_actor
+        from ..core.actor.actor_file import actor_body, load_actor
 
         body = actor_body(load_actor(actor_file), body)
     return body
 
 
 def _agreement(args, body, capture, proxy, frames, poses):
-    from ..core.evidence_agreement import result_agreement, summarise_agreement
-    from ..core.features.learned import LandmarkModel
-    from ..core.keypoints import rig_keypoints
+    from ..core.evidence.agreement import result_agreement, summarise_agreement
+    from ..core.evidence.learned import LandmarkModel
+    from ..core.evidence.keypoints import rig_keypoints
 
     per_view = result_agreement(body, proxy, capture.cameras, capture.frames.read, frames, poses,
                                 rig_keypoints(body), LandmarkModel())
@@ -106,7 +111,7 @@ def _agreement(args, body, capture, proxy, frames, poses):
 def _sheet(args, body, capture, proxy, frames, poses):
     import cv2
 
-    from ..core.overlay import contact_sheet, draw_body, draw_landmarks, part_colours
+    from ..core.results.overlay import contact_sheet, draw_body, draw_landmarks, part_colours
 
     landmarks = {}
     path = Path(args.result) / "keypoints.npz"
@@ -143,7 +148,7 @@ def run(args):
                                   "learned evidence when there is no ground truth")
         if args.capture is not None and (args.truth is None or args.sheet is not None):  # no truth: agreement
             from ..core.capture.capture import load_capture
-            from ..core.proxy import make_proxy
+            from ..core.body.proxy import make_proxy
 
             body = _subject(args)
             capture = load_capture(args.capture)
@@ -153,7 +158,6 @@ def run(args):
                 _agreement(args, body, capture, proxy, frames, poses)
             if args.sheet is not None:
                 _sheet(args, body, capture, proxy, frames, poses)
-    except (EvaluationError, FileNotFoundError, ValueError) as exc:
-        print(f"markerless_mocap evaluate: {exc}", file=sys.stderr)
-        return 2
+    except USER_ERRORS as exc:  # EvaluationError, a capture or file that cannot be read: the user's to fix
+        return cli_failure("evaluate", exc)
     return 0

@@ -3,12 +3,11 @@ import sys
 import time
 from pathlib import Path
 
-from ..core.likelihood import LIKELIHOODS
-from ..core.smoothing import DEFAULT_CUTOFF_HZ
-from ..core.tracking import PRESETS, TrackingSettings
+from ..core.tracking.options import OPTIONS, settings_from_choices
+from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 
-ALGORITHMS = ("isa", "apf", "pf", "fsa", "icp")
-LIKELIHOOD_NAMES = tuple(LIKELIHOODS)
+ALGORITHMS = OPTIONS["algorithm"].values
+LIKELIHOOD_NAMES = OPTIONS["likelihood"].values
 
 
 def parse_frames(text):
@@ -19,39 +18,31 @@ def parse_frames(text):
         a, _, b = text.partition("-")
         start, end = int(a), int(b) if b else int(a)
     except ValueError:
-        raise SystemExit(f"--frames must look like 0-59 (inclusive, capture frames from 0), got {text!r}")
+        raise SystemExit(f"--frames must look like 0-59 (inclusive, capture frames from 0), got {text!r}") from None
     if end < start:
         raise SystemExit(f"--frames {text}: the end comes before the start")
     return range(start, end + 1)
 
 
 def add_tracking_options(p):
-    p.add_argument("--algorithm", choices=ALGORITHMS, default="isa", help="optimiser (default: isa)")
-    p.add_argument("--likelihood", choices=LIKELIHOOD_NAMES, default=TrackingSettings.likelihood,
-                   help=f"energy terms (default: {TrackingSettings.likelihood}; 'l' = the learned person mask, "
-                        "'kp' = learned 2D keypoints)")
-    p.add_argument("--preset", choices=tuple(PRESETS), default="full",
-                   help="full: the paper's budget, 200 x 15, and the local fit on finer silhouettes (default); "
-                        "preview: 50 x 4 and the local fit at the search's resolution, several times faster")
-    p.add_argument("--particles", type=int, default=None,
-                   help="particles (ISA/APF); budget = particles x iterations (default: the preset's, 200)")
-    p.add_argument("--iterations", type=int, default=None,
-                   help="annealing iterations/layers per frame (default: the preset's, 15)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--refine", choices=("icp", "none"), default="icp",
-                   help="local fit of the silhouette outlines after the search (default: icp; none = plain optimiser)")
-    p.add_argument("--backend", choices=("auto", "numpy", "fast", "gpu"), default="auto",
-                   help="likelihood backend: fast (numba CPU), numpy (reference), gpu (GLSL via Blender's gpu "
-                        "module; an error if it cannot start), auto (gpu on a hardware GPU, else fast)")
-    p.add_argument("--background", choices=("auto", "plate", "median", "mog2", "knn"), default="auto",
-                   help="background model: plate if the capture has background/<cam>.png, else temporal median")
+    """--algorithm, --likelihood, --preset, ... as core/tracking/options.py has them (the Track panel's too)."""
+    for option in OPTIONS.values():
+        flag = f"--{option.name}"
+        if not option.choices:  # a number; particles and iterations default to the preset's
+            from_preset = option.name in ("particles", "iterations")
+            default = None if from_preset else option.default
+            shown = f"the preset's, {option.default} in {OPTIONS['preset'].default}" if from_preset else option.default
+            p.add_argument(flag, type=type(option.default), default=default,
+                           help=f"{option.description} (default: {shown})")
+            continue
+        each = "; ".join(f"{c.value}: {c.description}" for c in option.choices)
+        p.add_argument(flag, choices=option.values, default=option.default,
+                       help=f"{option.description} (default: {option.default}). {each}".replace("%", "%%"))
 
 
 def settings_from_args(args, backend=None):
     """TrackingSettings from the command line; `backend`: the resolved backend (else the one asked for)."""
-    return TrackingSettings.preset(args.preset, algorithm=args.algorithm, likelihood=args.likelihood,
-                                   particles=args.particles, iterations=args.iterations, seed=args.seed,
-                                   backend=backend or args.backend, background=args.background, refine=args.refine)
+    return settings_from_choices(args, backend=backend)
 
 
 def add_arguments(p):
@@ -140,12 +131,14 @@ def run_session(session, progress=None, log=print):
 
 def load_actor_option(args, scene, armature, backend=None):
     """The actor calibration for --actor FILE, or the one --calibrate fits now (saved in --out); None without."""
-    from ..core.actor_file import load_actor
-    from ..core.measured_lengths import parse_measured
+    from ..core.actor.actor_file import load_actor
+    from ..core.actor.measured_lengths import parse_measured
 
     measured = parse_measured(getattr(args, "calibrate_measured", None))
     if measured and not getattr(args, "calibrate", False):
-        raise ValueError("--calibrate-measured applies to --calibrate; with --actor the saved calibration's lengths "
+        from ..core.errors import InputError
+
+        raise InputError("--calibrate-measured applies to --calibrate; with --actor the saved calibration's lengths "
                          "are used (calibrate again with --measured to change them)")
     if getattr(args, "actor", None) is not None:
         return load_actor(args.actor)
@@ -169,10 +162,11 @@ def load_actor_option(args, scene, armature, backend=None):
 
 
 def run(args):
-    from ..addon.scene_bridge import SubjectError, find_armature
+    from ..addon.scene_bridge import find_armature
     from ..core.render import BackendUnavailableError
-    from ..core.results import ResultWriteError
+    from ..core.results.result_folder import ResultWriteError
     from .backend_choice import choose_backend
+    from .failures import USER_ERRORS, cli_failure
     from .track_session import TrackSession
 
     scene = open_subject(args.scene)
@@ -188,9 +182,8 @@ def run(args):
                                frames=parse_frames(args.frames), resume=args.resume,
                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), actor=actor,
                                smooth_hz=args.smooth)
-    except (SubjectError, ValueError, FileNotFoundError, ResultWriteError) as exc:
-        print(f"markerless_mocap track: {exc}", file=sys.stderr)
-        return 2
+    except USER_ERRORS as exc:  # the capture, the rig, the settings, the folders: the message names the fix
+        return cli_failure("track", exc)
     # printed once the inputs are checked: a bad input's message stays the only line
     print(f"likelihood backend: {choice.used} ({choice.reason})", file=sys.stderr)
     session.writer.info["backend"] = choice.to_dict()  # report.json: what was asked for, what ran, why
@@ -205,6 +198,10 @@ def run(args):
     except ResultWriteError as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 1
+    except Exception as exc:  # noqa: BLE001  (a frame's footage the user must fix, or a bug: said which)
+        code = cli_failure("track", exc)
+        print(f"{session.n_done} frames solved and saved in {args.out} (use --resume to continue)", file=sys.stderr)
+        return code
     if choice.used == "gpu":  # its private render scene must not be saved in tracked.blend
         from ..addon import gpu_likelihood
         gpu_likelihood.release()

@@ -5,7 +5,6 @@ operators only add a file browser. Settings follow blender-and-calibration.md 4.
 no curve simplification, start/end keys forced, Blender's bone axes, FBX unit scaling.
 """
 import os
-import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -14,9 +13,11 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from ..addon.anim_compat import keyed_frame_range
+from ..core.errors import InputError
+from .failures import user_message
 
 
-class ExportError(ValueError):
+class ExportError(InputError):
     """Nothing exportable (no keys, no armature) or a frame range that makes no sense."""
 
 
@@ -158,8 +159,8 @@ class _ExportOperator(ExportHelper):
 
         try:
             arm = subject_armature(context)
-        except ValueError as exc:
-            self.report({"ERROR"}, str(exc))
+        except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+            self.report({"ERROR"}, user_message(exc, "Finding the armature to export"))
             return {"CANCELLED"}
         if not self.filepath:
             self.filepath = _default_export_path(context, arm, self.filename_ext)
@@ -171,13 +172,8 @@ class _ExportOperator(ExportHelper):
         try:
             arm = subject_armature(context)
             path = self._export(context, arm)
-        except (ValueError, OSError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        except Exception as exc:
-            traceback.print_exc()
-            self.report({"ERROR"}, f"Export failed unexpectedly ({type(exc).__name__}: {exc}); "
-                                   f"see the system console")
+        except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+            self.report({"ERROR"}, user_message(exc, "The export"))
             return {"CANCELLED"}
         warning = self._warning(arm)
         self.report({"WARNING"} if warning else {"INFO"}, f"Exported {arm.name} to {path}"

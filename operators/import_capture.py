@@ -4,16 +4,17 @@
 turns them into a report in the UI. The capture is fully validated (calibration, footage, sizes,
 clips) before the scene is touched, so a failed import leaves the scene as it was.
 """
-import traceback
 from pathlib import Path
 
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
 from ..addon.properties import CAMERA_COLLECTION
+from ..core.errors import InputError
+from .failures import user_message
 
 
-class ClipLoadError(ValueError):
+class ClipLoadError(InputError):
     """Blender cannot open a camera's footage as a movie clip."""
 
 
@@ -134,13 +135,8 @@ class MOCAP_OT_import_capture(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             objects = import_capture(context, folder, props.units)
-        except (ValueError, OSError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        except Exception as exc:  # a bug: say so in the UI, keep the details in the console
-            traceback.print_exc()
-            self.report({"ERROR"}, f"Import failed unexpectedly ({type(exc).__name__}: {exc}); "
-                                   f"see the system console and report it")
+        except Exception as exc:  # noqa: BLE001  (the capture's error names its fix; a bug says it is one)
+            self.report({"ERROR"}, user_message(exc, "The import"))
             return {"CANCELLED"}
         fps = context.scene.render.fps / context.scene.render.fps_base
         self.report({"INFO"}, f"Imported {len(objects)} cameras, {props.capture_frames} frames at {fps:g} fps")

@@ -1,14 +1,17 @@
 """Check that the chosen armature can be tracked: DOF count, rig preset, and what stops it if not."""
-import traceback
-
 import bpy
+
+from .failures import user_message
 
 
 def subject_armature(context):
-    """The armature picked in the Subject panel, else the scene's only armature (SubjectError otherwise)."""
+    """The armature picked in the Subject panel, else the scene's only armature, which then fills the panel's
+    field: the panel shows what is tracked, and a second armature added later (Apply to a Copy) changes nothing.
+    SubjectError when there is none, or several and none picked."""
     from ..addon.scene_bridge import find_armature
 
-    picked = context.scene.mocap.armature
+    props = context.scene.mocap
+    picked = props.armature
     if picked is not None:
         if picked.name not in context.scene.objects:
             from ..addon.scene_bridge import SubjectError
@@ -16,11 +19,12 @@ def subject_armature(context):
             raise SubjectError(f"armature {picked.name!r} is not in scene {context.scene.name!r}; "
                                f"pick one of this scene's armatures in the Subject panel")
         return picked
-    return find_armature(context.scene)
+    props.armature = find_armature(context.scene)
+    return props.armature
 
 
 def check_subject(context):
-    """Build the engine's body from the subject; return a summary dict (raises ValueError on problems)."""
+    """Build the engine's body from the subject; return a summary dict (an InputError names a problem)."""
     from ..addon.scene_bridge import body_from_blender, find_skinned_mesh
 
     arm = subject_armature(context)
@@ -48,16 +52,10 @@ class MOCAP_OT_check_subject(bpy.types.Operator):
         props.subject_checked = True
         try:
             info = check_subject(context)
-        except ValueError as exc:  # SubjectError, RigMappingError: the message names the bones / the fix
-            props.subject_dofs, props.subject_preset, props.subject_problems = 0, "", str(exc)
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        except Exception as exc:
-            traceback.print_exc()
+        except Exception as exc:  # noqa: BLE001  (SubjectError, RigMappingError name the bones and the fix; else a bug)
             props.subject_dofs, props.subject_preset = 0, ""
-            props.subject_problems = f"unexpected {type(exc).__name__}: {exc}"
-            self.report({"ERROR"}, f"Rig check failed unexpectedly ({type(exc).__name__}: {exc}); "
-                                   f"see the system console and report it")
+            props.subject_problems = user_message(exc, "The rig check")
+            self.report({"ERROR"}, props.subject_problems)
             return {"CANCELLED"}
         props.subject_dofs = info["dofs"]
         props.subject_preset = info["preset"]

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import bpy
 
+from ..core.errors import InputError
+from .failures import USER_ERRORS, user_message
 from .modal_run import begin_modal, end_modal, is_cancel_key, show_status
 from .worker_job import WorkerJob
 
@@ -29,7 +31,7 @@ def _session_class():
     return TrackSession
 
 
-class TrackSetupError(ValueError):
+class TrackSetupError(InputError):
     """The Track panel is missing something the run needs."""
 
 
@@ -54,15 +56,15 @@ def run_settings(context):
     and that choice, shown in the panel; a TrackSetupError naming the fix when it cannot run here."""
     from ..addon.preferences import effective_backend
     from ..core.render import BackendUnavailableError
+    from ..core.tracking.options import settings_from_choices
     from .backend_choice import choose_backend
 
     props = context.scene.mocap
-    settings = props.tracking_settings()
     try:
         choice = choose_backend(effective_backend(context, props.backend))
     except BackendUnavailableError as exc:
         raise TrackSetupError(str(exc)) from exc
-    settings.backend = choice.used
+    settings = settings_from_choices(props, backend=choice.used)  # as the command line's settings_from_args
     props.backend_used = choice.summary  # the whole reason goes to report.json
     return settings, choice
 
@@ -83,7 +85,7 @@ def build_session(context, log=None, step=None):
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
     extra = {}
     if props.use_actor and props.actor_file:  # the Calibrate step's result (Subject panel)
-        from ..core.actor_file import load_actor
+        from ..core.actor.actor_file import load_actor
 
         extra["actor"] = load_actor(bpy.path.abspath(props.actor_file))
     session = _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
@@ -104,6 +106,7 @@ class TrackJob(WorkerJob):
     are called.
     """
     thread_name = "mocap-track"
+    doing = "Tracking"
 
     def __init__(self):
         super().__init__()
@@ -192,7 +195,8 @@ class TrackJob(WorkerJob):
         return True
 
     def _fail(self, message, details):
-        print(details)
+        if details:
+            print(details)
         if self.error is None:
             self.error = message
 
@@ -211,8 +215,8 @@ class TrackJob(WorkerJob):
                     break
                 if self._key(estimate) and on_frame is not None:
                     on_frame(estimate)
-        except Exception as exc:
-            self._fail(f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        except Exception as exc:  # noqa: BLE001  (reported; the frames solved before it stay keyed)
+            self._fail(*self.describe_failure(exc))
         self.drain()  # status messages
         self.done = True
 
@@ -269,14 +273,9 @@ class MOCAP_OT_track(bpy.types.Operator):
             session = build_session(context, log=job.report_progress, step=job.report_step)
             if props.resume and hasattr(session, "key_all"):
                 session.key_all()  # frames solved by the earlier run get their keys back
-        except (ValueError, OSError) as exc:
-            props.last_error = str(exc)
-            self.report({"ERROR"}, str(exc))
-            return None, None
-        except Exception as exc:
-            traceback.print_exc()
-            props.last_error = f"{type(exc).__name__}: {exc}"
-            self.report({"ERROR"}, f"Could not start tracking ({type(exc).__name__}: {exc}); see the system console")
+        except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+            props.last_error = user_message(exc, "Starting the tracking")
+            self.report({"ERROR"}, props.last_error)
             return None, None
         job.out_dir = output_folder(context)
         props.is_tracking = True
@@ -303,9 +302,10 @@ class MOCAP_OT_track(bpy.types.Operator):
         summary = None
         try:
             summary = job.finish()
-        except Exception as exc:
-            traceback.print_exc()
-            job._fail(f"writing the results failed: {type(exc).__name__}: {exc}", "")
+        except USER_ERRORS as exc:  # the keys made stay (a full disk, a folder made read-only meanwhile)
+            job._fail(f"writing the results failed: {exc}", "")
+        except Exception as exc:  # noqa: BLE001  (a bug: said so, the keys made stay)
+            job._fail(user_message(exc, "Writing the results"), "")
         self._show(context, job)
         if summary is not None:
             props.last_output = str(job.out_dir)
@@ -324,9 +324,13 @@ class MOCAP_OT_track(bpy.types.Operator):
             again = (f"smoothed again at {props.smoothing_hz:g} Hz" if smoothed else
                      "rewritten as solved (no smoothing)")
             props.status = f"All {job._done_before} frames were already tracked; the take {again}"
+            # the status bar's line: what happened first ("Tracked 0 frames" read as a failure)
+            done = (f"Smoothed again at {props.smoothing_hz:g} Hz" if smoothed else "Rewritten as solved, unsmoothed")
+            report = f"{done}: all {job._done_before} frames were already tracked; results in {props.last_output}"
         else:
             props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame{smoothed}"
-        self.report({"INFO"}, f"Tracked {solved} frames; results in {props.last_output}")
+            report = f"Tracked {solved} frames{smoothed}; results in {props.last_output}"
+        self.report({"INFO"}, report)
         return {"FINISHED"}
 
     # ---- synchronous: background mode, scripts, tests

@@ -12,17 +12,18 @@ import numpy as np
 
 from ..addon import scene_bridge
 from ..core.capture.capture import load_capture
-from ..core.features.learned import require_model
-from ..core.likelihood import resolve_weights
-from ..core.results import ResultWriter, atomic_path
-from ..core.smoothing import DEFAULT_CUTOFF_HZ, MIN_RUN, check_cutoff, smooth_poses
-from ..core.tracking import Tracker, TrackingSettings
+from ..core.evidence.learned import require_model
+from ..core.energy.likelihood import resolve_weights
+from ..core.results.result_folder import ResultWriter, atomic_path
+from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ, MIN_RUN, check_cutoff, smooth_poses
+from ..core.tracking.settings import TrackingSettings
+from ..core.tracking.tracker import Tracker
 
 
 def build_motion_models(body, capture_folder, fps, seed=0, progress=None):
     """Anatomical prior + AR(3) dynamics from the bundled CMU clips, leaving out the clip window a
     bundled sample scene was made from."""
-    from ..core.motion_library import build_motion_models as build, scene_exclusion
+    from ..core.tracking.motion_library import build_motion_models as build, scene_exclusion
 
     return build(body, fps=fps, exclude=scene_exclusion(capture_folder), seed=seed, progress=progress)
 
@@ -44,13 +45,13 @@ class TrackSession:
         # step(text, fraction): the one-off preparation before the first frame, as its own step;
         # step(None, 1.0) when it is over. May be called from the worker thread.
         self.step = step or (lambda text, fraction: None)
-        # The user's character; with an actor calibration (the dict of core.actor_file.load_actor) the tracker
+        # The user's character; with an actor calibration (the dict of core.actor.actor_file.load_actor) the tracker
         # poses the actor's body instead, and the character is keyed with the actor's rotations.
         self.character = scene_bridge.body_from_blender(armature_obj, mesh_obj, scene)
         self.actor = actor
         self.body = self.character
         if actor is not None:
-            from ..core.actor_file import actor_body
+            from ..core.actor.actor_file import actor_body
 
             self.body = actor_body(actor, self.character)
         self.capture = load_capture(capture_dir, units=units)
@@ -65,15 +66,15 @@ class TrackSession:
                     self.log(f"warning: {note}")
             else:
                 self.all_frames = footage.require_frames(frames)
-        except ValueError:
+        except Exception:
             self.capture.close()
             raise
-        # The finished take is low-passed at this cut-off (core/smoothing.py; 0 or None: keyed as solved).
+        # The finished take is low-passed at this cut-off (core/tracking/smoothing.py; 0 or None: keyed as solved).
         self.smooth_hz = float(smooth_hz or 0.0)
         if self.smooth_hz:
             try:
                 check_cutoff(self.smooth_hz, self.capture.frames.fps)
-            except ValueError:
+            except Exception:
                 self.capture.close()
                 raise
         self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
@@ -93,7 +94,7 @@ class TrackSession:
         self.frames = list(self.all_frames)
         self._resume_state = None
         if resume:
-            done, state = self.writer.load_checkpoint()
+            done, state = self._load_checkpoint()
             if done:
                 self._resume_state = state
                 solved = {e.frame for e in done}
@@ -102,11 +103,19 @@ class TrackSession:
         self._cancel = threading.Event()
         self.smoothed_poses = None  # set by smooth()
 
+    def _load_checkpoint(self):
+        """The earlier run's checkpoint (a CheckpointError, the user's to resolve, when it cannot continue)."""
+        try:
+            return self.writer.load_checkpoint()
+        except Exception:
+            self.capture.close()
+            raise
+
     def _keep_actor_file(self, actor):
         """The result folder keeps the calibration it was tracked with (evaluate and later takes read it)."""
         import json
 
-        from ..core.actor_file import write_actor
+        from ..core.actor.actor_file import write_actor
 
         path = self.writer.out / "actor.json"
         if path.is_file():
@@ -181,7 +190,7 @@ class TrackSession:
         first solved frame's pose)."""
         if self.actor is None:
             return pose
-        from ..core.proportions import character_poses
+        from ..core.actor.proportions import character_poses
 
         if first is None and self.writer.estimates:
             first = self.writer.estimates[0].pose
@@ -195,7 +204,7 @@ class TrackSession:
         scene_bridge.key_pose(self.armature, self.character, self.character_pose(pose, first), self.scene_frame(frame))
 
     def smooth(self):
-        """Low-pass the solved take (core/smoothing.py): joints.npz and poses.npz become the smoothed take (the
+        """Low-pass the solved take (core/tracking/smoothing.py): joints.npz and poses.npz become the smoothed take (the
         solved ones stay as *_raw.npz) and the character is keyed with it. Main thread (keys). Returns the
         smoothed poses, or None when smoothing is off or too few frames are solved. A finished take resumed with
         another cut-off (`track --resume --smooth HZ`: nothing left to solve) is smoothed again from the solved
@@ -253,7 +262,7 @@ class TrackSession:
         return written
 
     def write_overlays(self):
-        from ..core.overlay import OverlayWriter
+        from ..core.results.overlay import OverlayWriter
 
         proxy = self.prepare().proxy
         writer = OverlayWriter(self.writer.out, self.capture.cameras, self.capture.frames.fps)

@@ -12,6 +12,7 @@ import traceback
 
 class WorkerJob:
     thread_name = "mocap-job"
+    doing = "The run"  # what a bug's message says failed ("Tracking failed with an internal error ...")
 
     def __init__(self):
         self.queue = queue.Queue()
@@ -24,8 +25,14 @@ class WorkerJob:
         raise NotImplementedError
 
     def describe_failure(self, exc):
-        """(message, details) of an exception that ended `work`: what the user sees, then the traceback."""
-        return f"{type(exc).__name__}: {exc}", traceback.format_exc()
+        """(message, details) of an exception that ended `work`: what the user sees, then the traceback for the
+        console. The user's error (a frame of footage, a full disk) is its message alone; anything else says it is
+        a bug (operators/failures.py)."""
+        from .failures import USER_ERRORS, bug_message
+
+        if isinstance(exc, USER_ERRORS):
+            return str(exc), ""
+        return bug_message(exc, self.doing), traceback.format_exc()
 
     def start_worker(self):
         self.thread = threading.Thread(target=self._run_worker, name=self.thread_name, daemon=True)

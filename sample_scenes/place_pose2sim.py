@@ -132,7 +132,6 @@ def main(argv=None):
     sole = float(np.mean([min(p["points"]["left_heel"][2], p["points"]["right_heel"][2]) for p in per_frame]))
     spread = max(float(np.linalg.norm(p["loo"] - p["loo"].mean(axis=0), axis=1).max()) for p in per_frame)
 
-    import bpy
     data = subject.load_subject_data(args.data)
     hips_rest_z = float(data["bones"]["Hips"]["head"][2])
     placement = generate.save_subject_blend(data, folder / "subject.blend", hips, yaw0, None, offset=(0.0, 0.0),
@@ -140,7 +139,8 @@ def main(argv=None):
     M = np.array(placement["armature_matrix_world"])
     root = M[:3, 3] + M[:3, :3] @ np.array(data["bones"]["Hips"]["head"])
     info = dict(
-        scene="pose2sim_demo", source="Pose2Sim 0.10.49 wheel, Pose2Sim/Demo_SinglePerson (BSD-3-Clause, see SOURCE.txt)",
+        scene="pose2sim_demo",
+        source="Pose2Sim 0.10.49 wheel, Pose2Sim/Demo_SinglePerson (BSD-3-Clause, see SOURCE.txt)",
         cameras=[c.name for c in cams], image_sizes={c.name: list(c.size) for c in cams},
         calibration_size_warnings=size_warnings, fps=cap.frames.fps, n_frames=cap.frames.n_frames,
         ground_truth=None,

@@ -96,7 +96,8 @@ def build_room(bpy, rng, uncontrolled, grey=False):
     # a rug; in the uncontrolled scene a dark one under part of the path (low contrast with the trousers)
     rug_cols = ((0.03, 0.035, 0.05), (0.06, 0.05, 0.06)) if uncontrolled else ((0.35, 0.08, 0.06), (0.5, 0.42, 0.25))
     rug = noisy(bpy, "rug", *rug_cols, scale=9.0, kind="checker" if not uncontrolled else "noise")
-    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.9 if uncontrolled else -1.9, 0.4 if uncontrolled else 1.5, 0.004))
+    bpy.ops.mesh.primitive_plane_add(size=1.0,
+                                     location=(0.9 if uncontrolled else -1.9, 0.4 if uncontrolled else 1.5, 0.004))
     r = bpy.context.active_object
     r.name = "Rug"
     r.scale = (2.2, 3.0, 1.0)

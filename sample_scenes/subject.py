@@ -244,7 +244,7 @@ def build_subject(bpy, data, target_tris=5500, colours=None):
 
 # ---------------------------------------------------------------- an actor of other proportions (issue 15)
 def _rig_arrays(data):
-    from core.rig_presets import match_preset
+    from core.body.rig_presets import match_preset
 
     names = data["bone_names"]
     parents = np.array([names.index(data["bones"][n]["parent"]) if data["bones"][n]["parent"] else -1 for n in names])
@@ -254,9 +254,9 @@ def _rig_arrays(data):
 
 
 def scaled_subject_data(data, proportions):
-    """The subject's data with `proportions` applied by the engine's own rule (core.proportions.scale_rest):
+    """The subject's data with `proportions` applied by the engine's own rule (core.actor.proportions.scale_rest):
     bones lengthened per segment, the skin moved with them, the soles kept on the floor."""
-    from core.proportions import bone_factors, scale_rest
+    from core.actor.proportions import bone_factors, scale_rest
 
     names, parents, heads, tails, roles = _rig_arrays(data)
     axes = (tails - heads) / np.linalg.norm(tails - heads, axis=1, keepdims=True)
@@ -270,10 +270,10 @@ def scaled_subject_data(data, proportions):
 
 
 def segment_lengths_of(data, rest, rest_names):
-    """core.proportions.segment_lengths of the body in `data` (rest orientations from `rest`, (B,4,4) of an
+    """core.actor.proportions.segment_lengths of the body in `data` (rest orientations from `rest`, (B,4,4) of an
     armature with the same bone directions, bones named `rest_names`)."""
-    from core.body import Skeleton, build_body
-    from core.proportions import segment_lengths
+    from core.body.model import Skeleton, build_body
+    from core.actor.proportions import segment_lengths
 
     names, parents, heads, _, _ = _rig_arrays(data)
     rest = np.array(rest, float)[[list(rest_names).index(n) for n in names]]

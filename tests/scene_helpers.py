@@ -12,6 +12,19 @@ def scene_dir(name="walk"):
     return SCENES / name
 
 
+def cli_environment():
+    """The environment for `python -m markerless_mocap ...` in a subprocess: the package importable as the tests
+    import it, whatever the clone's folder is called."""
+    import os
+
+    import markerless_mocap
+
+    env = dict(os.environ)
+    package_parent = str(Path(markerless_mocap.__path__[0]).parent)  # where `markerless_mocap` imports from
+    env["PYTHONPATH"] = os.pathsep.join([package_parent, env.get("PYTHONPATH", "")])
+    return env
+
+
 def load_scene_body(bpy, name="walk"):
     """(body, armature object) of the scene's subject.blend."""
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
@@ -27,8 +40,8 @@ def ground_truth_poses(name="walk"):
     do not see, such as the neck twist, held at rest)."""
     import bpy
 
-    from markerless_mocap.core.pose_fitting import poses_from_joints
-    from markerless_mocap.core.results import load_joints
+    from markerless_mocap.core.body.pose_fit import poses_from_joints
+    from markerless_mocap.core.results.result_folder import load_joints
 
     body, _ = load_scene_body(bpy, name)
     names, frames, positions = load_joints(scene_dir(name) / "gt_joints.npz")

@@ -31,8 +31,8 @@ def subject_with_actor(addon_module_name, bpy_module, tmp_path):
     bridge = mod("addon.scene_bridge")
     arm = bridge.find_armature(bpy.context.scene)
     body = bridge.body_from_blender(arm, None, bpy.context.scene)
-    fit = _fit(body, mod("core.proportions"), mod("core.proportions_fit"))
-    path = mod("core.actor_file").save_actor(tmp_path / "actor.json", fit, subject_name=arm.name)
+    fit = _fit(body, mod("core.actor.proportions"), mod("core.actor.landmark_fit"))
+    path = mod("core.actor.actor_file").save_actor(tmp_path / "actor.json", fit, subject_name=arm.name)
     return bpy, mod, arm, body, fit, path
 
 
@@ -79,10 +79,11 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
 
     log = _draw_all(bpy)
     labels = [e[1] for e in log if e[0] == "label"]
-    assert lines[0] in labels and ("operator", "mocap.apply_actor_copy") in log
+    assert f"Calibrated: {lines[0]}" in labels and ("operator", "mocap.apply_actor_copy") in log
+    assert ("panel", "MOCAP_actor_summary", True) in log  # the lengths folded under the height's line
     assert ("prop", "calibrate_frames") in log and ("prop", "actor_height") in log and ("prop", "use_actor") in log
     # the measured segments, folded away, every one of the calibration's segments there; the header counts those set
-    from markerless_mocap.core.proportions import SEGMENTS
+    from markerless_mocap.core.actor.proportions import SEGMENTS
 
     assert ("panel", "MOCAP_measured_lengths", True) in log
     assert {e[1] for e in log if e[0] == "prop" and e[1].startswith("actor_")} >= {f"actor_{s}" for s in SEGMENTS}
@@ -112,7 +113,7 @@ def test_apply_to_a_copy_scales_the_copy_and_keeps_the_rig(subject_with_actor):
     assert bpy.ops.mocap.apply_actor_copy() == {"FINISHED"}
     copy = bpy.data.objects[arm.name + "_actor"]
     np.testing.assert_allclose(np.array([b.head_local for b in arm.data.bones]), heads_before)  # rig untouched
-    actor = mod("core.proportions").scaled_body(body, mod("core.proportions").Proportions(FACTORS, OVERALL))
+    actor = mod("core.actor.proportions").scaled_body(body, mod("core.actor.proportions").Proportions(FACTORS, OVERALL))
     np.testing.assert_allclose(np.array([b.head_local for b in copy.data.bones]), actor.skeleton.rest[:, :3, 3],
                                atol=2e-6)
     fore = copy.data.bones["LeftForeArm"].length / arm.data.bones["LeftForeArm"].length
@@ -130,7 +131,7 @@ def test_apply_to_a_copy_scales_the_copy_and_keeps_the_rig(subject_with_actor):
 
 def test_cli_reuses_a_saved_calibration_and_refuses_a_bad_one(subject_with_actor, tmp_path):
     bpy, mod, arm, body, fit, path = subject_with_actor
-    actor_file = mod("core.actor_file")
+    actor_file = mod("core.actor.actor_file")
     data = actor_file.load_actor(path)
     again = actor_file.proportions_for_body(data, body)  # same rig: the saved factors exactly
     assert again.factors == fit.proportions.factors and again.overall == fit.proportions.overall
@@ -158,7 +159,7 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     bones (its forearm length), and the BVH the rig's own bones (the character is keyed, not stretched)."""
     import json
 
-    from markerless_mocap.core.actor_file import load_actor
+    from markerless_mocap.core.actor.actor_file import load_actor
 
     scene = subject_blend_path().parents[1] / "actor"
     out = tmp_path / "r"

@@ -132,15 +132,16 @@ def test_blender_command_with_no_active_object_writes_every_result_file(addon_mo
 
 # ----------------------------------------------------------------------------- panels
 class _FakeLayout:
-    """Stands in for UILayout in background mode and checks what the panels ask it to draw."""
+    """Stands in for UILayout in background mode and checks what the panels ask it to draw. `folded`: layout
+    panels that start closed are drawn closed (as a user first sees them), else every one is drawn open."""
 
     _icons = None
 
-    def __init__(self, log):
-        self.log = log
+    def __init__(self, log, folded=False):
+        self.log, self.folded = log, folded
 
     def _sub(self, *_args, **_kwargs):
-        return _FakeLayout(self.log)
+        return _FakeLayout(self.log, self.folded)
 
     row = column = box = split = _sub
 
@@ -175,18 +176,19 @@ class _FakeLayout:
         params = {p.identifier for p in bpy.types.UILayout.bl_rna.functions["panel"].parameters}
         assert {"idname", "default_closed"} <= params
         self.log.append(("panel", idname, default_closed))
-        return _FakeLayout(self.log), _FakeLayout(self.log)
+        body = None if self.folded and default_closed else _FakeLayout(self.log, self.folded)
+        return _FakeLayout(self.log, self.folded), body
 
     def progress(self, factor=0.0, type="BAR", text=""):
         assert 0.0 <= factor <= 1.0 and type in {"BAR", "RING"}
         self.log.append(("progress", factor, text))
 
 
-def _draw_all(bpy):
+def _draw_all(bpy, folded=False, panels=PANELS):
     log = []
-    for name in PANELS:
+    for name in panels:
         panel = getattr(bpy.types, name)
-        panel.draw(type("P", (), {"layout": _FakeLayout(log)})(), bpy.context)
+        panel.draw(type("P", (), {"layout": _FakeLayout(log, folded)})(), bpy.context)
     return log
 
 
@@ -195,7 +197,8 @@ def test_panels_draw_settings_state_and_buttons(addon_module_name, bpy_module):
     log = _draw_all(bpy)
     props = {entry[1] for entry in log if entry[0] == "prop"}
     assert {"capture_dir", "units", "armature", "algorithm", "likelihood", "preset", "particles", "iterations", "seed",
-            "backend", "smoothing_hz", "use_frame_range", "frame_start", "frame_end", "output_dir"} <= props
+            "backend", "background", "smoothing_hz", "use_frame_range", "frame_start", "frame_end",
+            "output_dir"} <= props
     ops = {entry[1] for entry in log if entry[0] == "operator"}
     assert ops == {"mocap.import_capture", "mocap.check_subject", "mocap.track", "mocap.export_fbx",
                    "mocap.export_bvh"}
@@ -219,6 +222,56 @@ def test_panels_draw_settings_state_and_buttons(addon_module_name, bpy_module):
     assert any("Esc to cancel" in t for t in labels)
     assert ("progress", pytest.approx(0.25), "10/40 frames") in log
     assert sum(len(t) for t in labels if set(t) == {"x"}) == 300  # the long error is wrapped, not cut
+
+
+def _labels(log):
+    return [entry[1] for entry in log if entry[0] == "label"]
+
+
+def test_subject_panel_shows_the_armature_that_will_be_tracked(addon_module_name, bpy_module):
+    """The Armature field stayed empty while tracking used the scene's armature: now the panel names the one that
+    will be tracked, the first step that uses it fills the field, and several armatures ask for a pick."""
+    bpy = bpy_module
+    subject = ("MOCAP_PT_subject",)
+    m = bpy.context.scene.mocap
+    assert any("No armature in the scene" in t for t in _labels(_draw_all(bpy, panels=subject)))
+    arm = build_armature(bpy, "cmu_mb_rest.json", name="Performer")
+    assert m.armature is None
+    assert "Tracks Performer, the scene's only armature" in _labels(_draw_all(bpy, panels=subject))
+    _skin_boxes(bpy, arm)
+    assert bpy.ops.mocap.check_subject() == {"FINISHED"}
+    assert m.armature == arm  # the checked rig fills the field
+    assert not any(t.startswith("Tracks ") for t in _labels(_draw_all(bpy, panels=subject)))
+    other = build_armature(bpy, "cmu_mb_rest.json", name="Performer_actor")  # e.g. Apply to a Copy
+    setup = _module(addon_module_name, "operators.setup_subject")
+    assert setup.subject_armature(bpy.context) == arm  # the field, not "the scene's only one", decides
+    m.armature = None  # several and none picked: the panel asks before Track would stop on it
+    text = " ".join(_labels(_draw_all(bpy, panels=subject)))
+    assert "2 armatures in the scene (Performer, Performer_actor): pick the one to track" in text
+    with pytest.raises(RuntimeError, match="expected exactly one armature .*pick it in the Subject panel"):
+        bpy.ops.mocap.check_subject()
+    m.armature = other
+    assert not any("pick the one" in t for t in _labels(_draw_all(bpy, panels=subject)))
+
+
+def test_calibrated_proportions_fold_under_one_summary_line(addon_module_name, bpy_module):
+    """After Calibrate Actor a dozen lines of lengths pushed the Track panel out of view: they are folded under the
+    height's line until the user opens them."""
+    bpy = bpy_module
+    m = bpy.context.scene.mocap
+    m.subject_checked, m.subject_dofs, m.subject_preset = True, 30, "cmu"
+    lines = ["height 1.742 m (rig 1.800 m)"] + [f"segment {i} {30 + i:.1f} cm (rig 31.0 cm, x0.9{i})"
+                                                for i in range(11)]
+    before = _labels(_draw_all(bpy, folded=True, panels=("MOCAP_PT_subject",)))
+    m.actor_file, m.actor_summary = "/somewhere/actor.json", "\n".join(lines)
+    log = _draw_all(bpy, folded=True, panels=("MOCAP_PT_subject",))
+    folded = _labels(log)
+    assert ("panel", "MOCAP_actor_summary", True) in log
+    assert "Calibrated: height 1.742 m (rig 1.800 m)" in folded
+    assert not any(line in folded for line in lines[1:])
+    assert len(folded) == len(before) + 1  # one line for the whole calibration while folded
+    opened = _labels(_draw_all(bpy, panels=("MOCAP_PT_subject",)))
+    assert all(line in opened for line in lines[1:])
 
 
 # ----------------------------------------------------------------------------- check rig
@@ -351,7 +404,7 @@ def test_track_execute_keys_every_frame_and_finishes(fake_track):
     m = bpy.context.scene.mocap
     m.algorithm, m.likelihood, m.particles, m.iterations, m.seed, m.backend = "apf", "silhch+color", 50, 4, 7, "numpy"
     m.use_frame_range, m.frame_start, m.frame_end = True, 2, 4
-    assert m.smoothing_hz == 8.0  # the default cut-off (core/smoothing.py)
+    assert m.smoothing_hz == 8.0  # the default cut-off (core/tracking/smoothing.py)
     m.smoothing_hz = 5.5
     assert bpy.ops.mocap.track() == {"FINISHED"}
 
@@ -468,7 +521,7 @@ def test_time_left_uses_the_recent_frames_not_the_first_search(fake_track):
 def test_session_reports_its_preparation_as_steps(monkeypatch, tmp_path):
     """The real TrackSession: the motion models' progress arrives as (text, fraction) steps, rising, then
     (None, 1.0) once the tracker is built; the cheap motion-library callback is real, the model fit faked."""
-    from markerless_mocap.core import motion_library
+    from markerless_mocap.core.tracking import motion_library
     from markerless_mocap.operators import track_session
 
     calls = []
@@ -512,13 +565,33 @@ def test_track_resume_rekeys_earlier_frames_and_counts_them(fake_track):
 def test_track_reports_worker_errors_and_keeps_solved_frames(fake_track, monkeypatch):
     bpy, _, arm, compat, _ = fake_track
     monkeypatch.setattr(FakeSession, "fail_at", 1)
-    with pytest.raises(RuntimeError, match="boom: the likelihood exploded"):
+    with pytest.raises(RuntimeError, match="boom: the likelihood exploded.*This is a bug in Markerless Mocap"):
         bpy.ops.mocap.track()
     session = FakeSession.last
     assert session.keyed == [0] and session.finished is not None
     assert compat.keyed_frames(arm, "location") == [1.0]
     m = bpy.context.scene.mocap
-    assert "boom" in m.last_error and not m.is_tracking
+    assert "boom" in m.last_error and "bug" in m.last_error and not m.is_tracking
+
+
+def test_a_bad_frame_of_footage_is_the_users_error_not_a_bug(fake_track, monkeypatch, addon_module_name):
+    """An InputError while solving (a video that ends early) reads as the user's to fix: its message alone."""
+    bpy, _, arm, compat, _ = fake_track
+    frames = _module(addon_module_name, "core.capture.frames")
+    message = "camera 'cam2' (cam2.mp4) has only 1 frames (0-0): track frames 0-0 at most"
+    solve = FakeSession.solve_next
+
+    def solve_next(self):
+        if self.solved:
+            raise frames.FrameSourceError(message)
+        return solve(self)
+
+    monkeypatch.setattr(FakeSession, "solve_next", solve_next)
+    with pytest.raises(RuntimeError, match="cam2.mp4"):
+        bpy.ops.mocap.track()
+    m = bpy.context.scene.mocap
+    assert m.last_error == message and "bug" not in m.status
+    assert FakeSession.last.keyed == [0] and compat.keyed_frames(arm, "location") == [1.0]
 
 
 def test_track_setup_errors_name_the_fix(fake_track):
@@ -534,6 +607,46 @@ def test_track_setup_errors_name_the_fix(fake_track):
     with pytest.raises(RuntimeError, match="before the first"):
         bpy.ops.mocap.track()
     assert FakeSession.last is None and not m.is_tracking
+
+
+class _FinishedTake(FakeSession):
+    """A take whose every frame an earlier run solved; finishing it smooths again (joints_raw written) or not."""
+
+    smooths = True
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.solved, self.frames = self.solved + self.frames, []
+
+    def finish(self, export=True):
+        super().finish(export)
+        return {**self.finished, **({"joints_raw": "joints_raw.npz"} if self.smooths else {})}
+
+
+@pytest.mark.parametrize("smooths", [True, False])
+def test_a_resmooth_says_what_it_did_in_the_status_bar(fake_track, monkeypatch, smooths):
+    """Resume on a finished take with another Smoothing: nothing is solved, and the status bar said 'Tracked 0
+    frames'; it says the take was smoothed again (or rewritten unsmoothed) and that every frame was tracked."""
+    from types import SimpleNamespace
+
+    bpy, track, _arm, _compat, tmp_path = fake_track
+    monkeypatch.setattr(track, "TrackSession", _FinishedTake)
+    monkeypatch.setattr(_FinishedTake, "smooths", smooths)
+    m = bpy.context.scene.mocap
+    m.resume, m.smoothing_hz = True, 3.0 if smooths else 0.0
+    job = track.TrackJob()
+    job.out_dir = track.output_folder(bpy.context)  # as the operator's start does
+    job.run_inline(track.build_session(bpy.context))
+    reports = []
+    operator = SimpleNamespace(report=lambda level, text: reports.append((level, text)),
+                               _show=lambda context, j: track.MOCAP_OT_track._show(None, context, j))
+    assert track.MOCAP_OT_track._end(operator, bpy.context, job) == {"FINISHED"}
+    [(level, text)] = reports
+    done = "Smoothed again at 3 Hz" if smooths else "Rewritten as solved, unsmoothed"
+    assert level == {"INFO"} and text == f"{done}: all 3 frames were already tracked; results in {tmp_path / 'out'}"
+    assert "Tracked 0" not in m.status and m.frames_solved == 3
+    results = _labels(_draw_all(bpy, panels=("MOCAP_PT_results",)))
+    assert "3 frames" in results  # no '0.0 s/frame': no frame was timed
 
 
 def _drain_until(job, condition, timeout=10.0):
@@ -571,7 +684,8 @@ def test_threaded_job_reports_worker_error(fake_track, monkeypatch):
     job = track.TrackJob()
     job.start(track.build_session(bpy.context))
     _drain_until(job, lambda: job.done)
-    assert job.error == "RuntimeError: boom: the likelihood exploded"
+    assert job.error.startswith("Tracking failed with an internal error (RuntimeError: boom: the likelihood "
+                                "exploded). This is a bug in Markerless Mocap")
     assert [e.frame for e in job.estimates] == [0, 1]
     job.finish()
     assert FakeSession.last.finished == {"export": True, "frames": [0, 1]}

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from markerless_mocap.core.camera import Camera, rodrigues_to_matrix
+from markerless_mocap.core.capture.camera import Camera, rodrigues_to_matrix
 from markerless_mocap.core.capture.calibration import (CalibrationError, read_calibration,
                                                        write_easymocap_calibration, write_toml_calibration)
 from markerless_mocap.core.capture.capture import load_capture
@@ -94,7 +94,8 @@ def test_missing_fields_are_named(tmp_path, field, message):
     p = write_toml_calibration(two_cameras(), tmp_path / "calibration.toml")
     lines = p.read_text().splitlines()
     first_table_end = lines.index("")  # drop the field from the first camera only (for 'matrix': from both)
-    kept = [ln for i, ln in enumerate(lines) if not (ln.startswith(f"{field} =") and (field == "matrix" or i < first_table_end))]
+    kept = [ln for i, ln in enumerate(lines)
+            if not (ln.startswith(f"{field} =") and (field == "matrix" or i < first_table_end))]
     p.write_text("\n".join(kept))
     with pytest.raises(CalibrationError) as err:
         read_calibration(p)

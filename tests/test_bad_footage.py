@@ -23,7 +23,8 @@ def _video(path, n, fps=25.0):
 
 @pytest.fixture
 def uneven(tmp_path):
-    return {"a": _video(tmp_path / "a.mp4", 41), "b": _video(tmp_path / "b.mp4", 21), "c": _video(tmp_path / "c.mp4", 41)}
+    return {"a": _video(tmp_path / "a.mp4", 41), "b": _video(tmp_path / "b.mp4", 21),
+            "c": _video(tmp_path / "c.mp4", 41)}
 
 
 def test_a_range_past_a_short_video_is_refused_naming_the_camera(uneven):

@@ -9,8 +9,8 @@ from scene_helpers import scene_dir
 bpy = pytest.importorskip("bpy")
 
 from markerless_mocap.addon.scene_bridge import body_from_blender  # noqa: E402
-from markerless_mocap.core.rig_checks import RigCheckError, require_person_height, standing_height  # noqa: E402
-from markerless_mocap.core.rig_presets import RigMappingError  # noqa: E402
+from markerless_mocap.core.body.rig_checks import RigCheckError, require_person_height, standing_height  # noqa: E402
+from markerless_mocap.core.body.rig_presets import RigMappingError  # noqa: E402
 from markerless_mocap.operators.cli import main  # noqa: E402
 
 

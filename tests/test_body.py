@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from markerless_mocap.core.body import Skeleton, build_body
-from markerless_mocap.core.proxy import make_proxy
-from markerless_mocap.core.rig_presets import RigMappingError
+from markerless_mocap.core.body.model import Skeleton, build_body
+from markerless_mocap.core.body.proxy import make_proxy
+from markerless_mocap.core.body.rig_presets import RigMappingError
 
 from rig_helpers import build_armature, load_subject
 
@@ -75,7 +75,7 @@ def test_batch_equals_single_calls(subject):
 
 def test_local_bases_equal_the_product_of_each_dof_rotation(subject):
     # local_bases makes every DOF rotation in one batched call; the reference multiplies them bone by bone.
-    from markerless_mocap.core.rotations import axis_angle_matrix
+    from markerless_mocap.core.body.rotations import axis_angle_matrix
 
     _, _, body = subject
     poses = random_poses(body, np.random.default_rng(3), 7)
@@ -88,7 +88,7 @@ def test_local_bases_equal_the_product_of_each_dof_rotation(subject):
 
 
 def test_numba_kinematics_equal_the_numpy_reference(subject):
-    from markerless_mocap.core import fast_kinematics
+    from markerless_mocap.core.body import kinematics_fast as fast_kinematics
 
     _, _, body = subject
     rng = np.random.default_rng(11)
@@ -106,8 +106,8 @@ def test_numba_kinematics_equal_the_numpy_reference(subject):
 
 
 def test_numba_skinning_equals_the_numpy_reference(subject):
-    from markerless_mocap.core.body import blend_vertices
-    from markerless_mocap.core.fast_skinning import blend_vertices as fast_blend
+    from markerless_mocap.core.body.model import blend_vertices
+    from markerless_mocap.core.body.skinning_fast import blend_vertices as fast_blend
 
     _, _, body = subject
     proxy = make_proxy(body, 2000)
@@ -240,7 +240,7 @@ def test_pose_fit_recovers_heads_and_holds_unseen_angles(subject):
     """Fitting DOFs to bone heads alone: the heads come back, and the neck twist, which barely moves
     a head, stays at rest with the hold term instead of chasing the noise (it reached its limit on the
     sample scenes' ground truth before)."""
-    from markerless_mocap.core.pose_fitting import fit_pose_sequence
+    from markerless_mocap.core.body.pose_fit import fit_pose_sequence
 
     _, _, body = subject
     rng = np.random.default_rng(5)
@@ -262,7 +262,7 @@ def test_pose_fit_recovers_heads_and_holds_unseen_angles(subject):
 def test_single_rotation_fast_path_equals_the_batched_formula():
     """skew and axis_angle_matrix take a literal / scalar path for one vector and one angle (the local fit
     calls them per DOF): the same matrices as the batched path."""
-    from markerless_mocap.core.rotations import axis_angle_matrix, skew
+    from markerless_mocap.core.body.rotations import axis_angle_matrix, skew
 
     rng = np.random.default_rng(3)
     for _ in range(20):

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from markerless_mocap.core.camera import Camera, rodrigues_to_matrix
+from markerless_mocap.core.capture.camera import Camera, rodrigues_to_matrix
 from markerless_mocap.core.capture.calibration import (CalibrationError, CalibrationNotFoundError, natural_key,
                                                        read_calibration, write_easymocap_calibration,
                                                        write_toml_calibration)
@@ -165,8 +165,8 @@ def test_qualisys_qca():
 
 def test_qca_rotated_view_is_refused(tmp_path):
     p = tmp_path / "x.qca.txt"
-    p.write_text((DATA / "qualisys.qca.txt").read_text().replace('serial="26581" model="Miqus Video" viewrotation="0"',
-                                                                 'serial="26581" model="Miqus Video" viewrotation="90"'))
+    p.write_text((DATA / "qualisys.qca.txt").read_text().replace(
+        'serial="26581" model="Miqus Video" viewrotation="0"', 'serial="26581" model="Miqus Video" viewrotation="90"'))
     with pytest.raises(CalibrationError, match="'26581' has viewrotation=90"):
         read_calibration(p)
 
@@ -242,11 +242,13 @@ BROKEN = [
      r"camera 'A' 'rotation' is not orthonormal"),
     ("rotation = [0.0, 0.0, 0.0]", "rotation = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]",
      r"camera 'A' 'rotation' is a reflection"),
-    ("rotation = [0.0, 0.0, 0.0]", "rotation = [0.0, 0.0]", r"camera 'A' has 2 values in 'rotation'; expected 3 values or 3x3"),
+    ("rotation = [0.0, 0.0, 0.0]", "rotation = [0.0, 0.0]",
+     r"camera 'A' has 2 values in 'rotation'; expected 3 values or 3x3"),
     ("distortions = [0.0, 0.0, 0.0, 0.0, 0.0]", "distortions = [0.0, 0.0, 0.0]",
      r"camera 'A' has 3 values in 'distortions'; expected 0, 4, 5 or 8 values"),
     ("size = [640, 480]", "size = [640, 0]", r"camera 'A' has image size"),
-    ("size = [640, 480]", "size = [640, 480]\nfisheye = true", r"camera 'A' is a fisheye camera; fisheye lenses are not"),
+    ("size = [640, 480]", "size = [640, 480]\nfisheye = true",
+     r"camera 'A' is a fisheye camera; fisheye lenses are not"),
     ("translation = [0.0, 0.0, 3.0]\n", "", r"camera 'A' has no 'translation'"),
     ("[cam_0]", "[cam_0", r"calibration\.toml: not valid TOML"),
     ("matrix", "intrinsics", r"no camera tables found"),

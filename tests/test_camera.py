@@ -3,8 +3,8 @@ import cv2
 import numpy as np
 import pytest
 
-from markerless_mocap.core.camera import (Camera, CameraError, camera_from_blender,
-                                          camera_to_blender, matrix_to_rodrigues, rodrigues_to_matrix)
+from markerless_mocap.core.capture.camera import (Camera, CameraError, camera_from_blender, camera_to_blender,
+                                                  matrix_to_rodrigues, rodrigues_to_matrix)
 
 
 def random_camera(rng, width=640, height=480, fx=800.0, fy=None, n_dist=0, dist_scale=0.05, name="cam"):

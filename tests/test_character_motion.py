@@ -23,12 +23,12 @@ def _tool():
                          ids=["subject scaled to 1.2 m", "other proportions"])
 def test_character_keeps_its_bones_and_its_feet_on_the_floor(addon_module_name, bpy_module, tmp_path, factors,
                                                               overall):
-    """Walk's true motion (30 frames) keyed onto a smaller character: the BVH re-imports (BVH and FBX) with the character's
-    own bone offsets (not the subject's), and its lowest skin point stays within 2.5 cm of the floor
+    """Walk's true motion (30 frames) keyed onto a smaller character: the BVH re-imports (BVH and FBX) with the
+    character's own bone offsets (not the subject's), and its lowest skin point stays within 2.5 cm of the floor
     (median 1.2-1.3 cm: the shoe sole's rounding) whenever the actor's does within 3 cm."""
     from scene_helpers import ground_truth_poses
 
-    from markerless_mocap.core.proportions import Proportions
+    from markerless_mocap.core.actor.proportions import Proportions
 
     _, _, poses, _ = ground_truth_poses("walk")
     report = _tool().check_character(bpy_module, addon_module_name, subject_blend_path(), poses[:30],
@@ -53,7 +53,7 @@ def test_mixamo_character_receives_the_walk(addon_module_name, bpy_module, tmp_p
     the subject's) the way track keys a character: BVH and FBX re-import with the character's own bone offsets,
     and its lowest skin point stays 0-4.5 cm above the floor (measured 0.2-4.0 cm, median 2.7; the actor's
     own -0.5-2.5, median 1.7: the character's feet float about a centimetre higher)."""
-    from markerless_mocap.core.proportions import Proportions
+    from markerless_mocap.core.actor.proportions import Proportions
     from scene_helpers import ground_truth_poses
 
     _, _, poses, _ = ground_truth_poses("walk")
@@ -74,7 +74,7 @@ def test_mixamo_character_receives_the_walk(addon_module_name, bpy_module, tmp_p
 def test_root_path_is_rescaled_about_the_floor_and_the_first_frame(bpy_module):
     from scene_helpers import ground_truth_poses
 
-    from markerless_mocap.core.proportions import Proportions, character_poses, scaled_body, standing_heights
+    from markerless_mocap.core.actor.proportions import Proportions, character_poses, scaled_body, standing_heights
 
     body, _, poses, _ = ground_truth_poses("walk")
     small = scaled_body(body, Proportions.uniform(0.75))
@@ -95,7 +95,7 @@ def test_prior_clips_map_onto_the_mixamo_rig(bpy_module):
     the arms worst, against 7-13 mm): the prior is built, but from coarser poses."""
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
     from markerless_mocap.core.mocap.bvh import read_bvh
-    from markerless_mocap.core.motion_to_dof import dof_sequence_from_clip, role_name_map
+    from markerless_mocap.core.mocap.to_dof import dof_sequence_from_clip, role_name_map
 
     clip = read_bvh(REPO / "core" / "data" / "motion" / "01_01.bvh")
     residual = {}

@@ -4,8 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from markerless_mocap.core.evaluation import EVAL_JOINTS, EvaluationError, joint_errors, summarise
-from markerless_mocap.core.results import load_joints
+from markerless_mocap.core.results.evaluation import EVAL_JOINTS, EvaluationError, joint_errors, summarise
+from markerless_mocap.core.results.result_folder import load_joints
 from markerless_mocap.operators.cli import main
 
 NAMES = ["Hips", "LeftUpLeg", "RightUpLeg", "LeftLeg", "RightLeg", "LeftFoot", "RightFoot", "LeftArm", "RightArm",

@@ -48,7 +48,8 @@ def _build_keyed_subject(bpy):
     for name, (head, tail, _) in BONES.items():
         c = (np.array(head) + np.array(tail)) / 2
         base = len(verts)
-        verts += [tuple(c + 0.03 * np.array(s)) for s in np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).T.reshape(-1, 3)]
+        corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).T.reshape(-1, 3)
+        verts += [tuple(c + 0.03 * np.array(s)) for s in corners]
         faces += [tuple(base + i for i in q) for q in ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6),
                                                        (0, 2, 6, 4), (1, 5, 7, 3))]
         groups.append((name, range(base, base + 8)))

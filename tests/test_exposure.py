@@ -7,9 +7,9 @@ do that, which is why the curve is the default."""
 import numpy as np
 import pytest
 
-from markerless_mocap.core.features import BackgroundModel, FeatureInputError, silhouette_iou
-from markerless_mocap.core.features.exposure import (apply_tone_curve, channel_gain, fit_tone_curve, isotonic,
-                                                      match_exposure)
+from markerless_mocap.core.evidence import BackgroundModel, FeatureInputError, silhouette_iou
+from markerless_mocap.core.evidence.exposure import (apply_tone_curve, channel_gain, fit_tone_curve, isotonic,
+                                                     match_exposure)
 from test_features import person_mask, textured_plate
 
 
@@ -81,7 +81,7 @@ def test_unknown_exposure_model_is_a_clear_error(plate):
 def test_tone_curve_from_a_strided_subsample_matches_the_full_fit():
     """Above _MAX_CURVE_SAMPLES (an HD frame) the curve is fitted on an even stride of the samples: its knots
     stay within a fraction of a grey level of the fit on every sample."""
-    from markerless_mocap.core.features import exposure
+    from markerless_mocap.core.evidence import exposure
 
     rng = np.random.default_rng(3)
     n = 3 * exposure._MAX_CURVE_SAMPLES

@@ -4,7 +4,6 @@ Constructed scenes with known answers (a textured room plate, a person-like colo
 that must stay background, exposure changes, sensor noise), checks against simple references (SciPy
 EDT, SciPy banded solver, an explicit diffusion scheme) and, when present, the rendered sample scene.
 """
-import time
 from pathlib import Path
 
 import cv2
@@ -12,11 +11,10 @@ import numpy as np
 import pytest
 from scipy import linalg, ndimage
 
-from markerless_mocap.core.features import (BackgroundModel, FeatureInputError, ViewFeatures,
-                                             compute_view_features, diffusion_explicit_reference,
-                                             distance_to_mask, edge_enhancing_diffusion, lab_ab,
-                                             silhouette_iou, sobel_edges)
-from markerless_mocap.core.features.diffusion import thomas_solve
+from markerless_mocap.core.evidence import (BackgroundModel, FeatureInputError, ViewFeatures, compute_view_features,
+                                            diffusion_explicit_reference, distance_to_mask, edge_enhancing_diffusion,
+                                            lab_ab, silhouette_iou, sobel_edges)
+from markerless_mocap.core.evidence.diffusion import thomas_solve
 
 WALK = Path(__file__).resolve().parents[1] / "sample_scenes" / "walk"
 
@@ -338,7 +336,7 @@ def test_diffusion_accepts_one_channel_and_rejects_bad_parameters():
 
 
 def test_strip_wise_temporal_median_equals_numpy_median_of_the_stack():
-    from markerless_mocap.core.features.background import _temporal_median
+    from markerless_mocap.core.evidence.background import _temporal_median
 
     rng = np.random.default_rng(5)
     frames = [rng.uniform(0, 255, (150, 37, 3)).astype(np.float32) for _ in range(7)]

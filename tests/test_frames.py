@@ -160,7 +160,7 @@ def test_find_video(tmp_path, clip):
 # ---- load_capture ------------------------------------------------------------------------------
 def _tiny_capture(root, clip, size_2=(W, H)):
     """Two cameras: cam_1 as mp4, cam_2 as a numbered png folder; a background plate for cam_1."""
-    from markerless_mocap.core.camera import Camera, rodrigues_to_matrix
+    from markerless_mocap.core.capture.camera import Camera, rodrigues_to_matrix
     from markerless_mocap.core.capture.calibration import write_toml_calibration
 
     path, frames = clip
@@ -242,7 +242,7 @@ def test_footage_a_few_pixels_off_the_calibration(tmp_path, clip):
     more than 16 px / 1 % per side, a resize, or a principal point outside the footage are refused."""
     import warnings
 
-    from markerless_mocap.core.camera import Camera
+    from markerless_mocap.core.capture.camera import Camera
     from markerless_mocap.core.capture.capture import CaptureError, fit_camera_to_footage, load_capture
 
     # cam_2's calibration is 1 px wider and taller than its image folder (160x120; 1 % of 161 is 1.6 px): accepted
@@ -254,8 +254,8 @@ def test_footage_a_few_pixels_off_the_calibration(tmp_path, clip):
         msgs = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
         assert len(msgs) == 1 and "\n" not in msgs[0]
         assert [w.filename for w in caught] == [str(tmp_path / "cap" / "videos" / "cam_2")] and caught[0].line is None
-        assert re.search(r"camera 'cam_2': the calibration \(calibration\.toml\) says 161x121 but the footage is 160x120: "
-                         r"1 x 1 px off", msgs[0]), msgs[0]
+        assert re.search(r"camera 'cam_2': the calibration \(calibration\.toml\) says 161x121 but the footage is "
+                         r"160x120: 1 x 1 px off", msgs[0]), msgs[0]
         assert cap.camera("cam_2").size == (W, H) and cap.camera("cam_1").size == (W, H)
         np.testing.assert_array_equal(cap.camera("cam_2").K, cams[1].K)     # same pixel grid, same K
         np.testing.assert_array_equal(cap.frames.read(3)["cam_2"], folder_frames[3])
@@ -273,7 +273,8 @@ def test_footage_a_few_pixels_off_the_calibration(tmp_path, clip):
         assert fit_camera_to_footage(cam, 1088, 1920) is cam            # exact size: silent
     # refused: too far off (17 px > 16 px), over 1 % of a small side, a resize, principal point outside
     with pytest.raises(CaptureError, match=r"camera 'cam01': the calibration \(Calib\.qca\.txt\) says 1088x1920 but "
-                                           r"videos/cam01\.mp4 is 1071x1920: 17 x 0 px off .*calibrate the cameras at 1071x1920"):
+                                           r"videos/cam01\.mp4 is 1071x1920: 17 x 0 px off "
+                                           r".*calibrate the cameras at 1071x1920"):
         fit_camera_to_footage(cam, 1071, 1920, "Calib.qca.txt", "videos/cam01.mp4")
     small = Camera("c", [[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]], [], np.eye(3), [0, 0, 3.0], 640, 480)
     with pytest.raises(CaptureError, match="640x480 but its footage is 640x474: 0 x 6 px off"):

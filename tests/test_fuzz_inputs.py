@@ -1,7 +1,7 @@
 """Fuzzing the calibration readers and the capture loader with generated inputs: whatever the file
 holds, they load or raise the project's own error types (core/capture: CalibrationError, CaptureError,
-FrameSourceError), never a TypeError, KeyError, cv2.error or a crash. Deterministic (derandomize) and
-bounded (max_examples), so CI runs the same inputs in a few seconds."""
+FrameSourceError, each an InputError, the user's to fix), never a TypeError, KeyError, cv2.error or a crash.
+Deterministic (derandomize) and bounded (max_examples), so CI runs the same inputs in a few seconds."""
 import math
 import re
 import tempfile
@@ -17,6 +17,7 @@ from hypothesis import strategies as st  # noqa: E402
 from markerless_mocap.core.capture.calibration import CalibrationError, read_calibration  # noqa: E402
 from markerless_mocap.core.capture.capture import CaptureError, load_capture  # noqa: E402
 from markerless_mocap.core.capture.frames import FrameSourceError  # noqa: E402
+from markerless_mocap.core.errors import InputError  # noqa: E402
 
 OWN_ERRORS = (CalibrationError, CaptureError, FrameSourceError)
 DATA = Path(__file__).parent / "data" / "calibration"
@@ -30,6 +31,7 @@ def loads_or_refuses(read):
         result = read()
     except OWN_ERRORS as exc:
         assert str(exc).strip(), "an error without a message"
+        assert isinstance(exc, InputError), "the user's file, so the user's error (not reported as a bug)"
         return None
     return result
 
@@ -41,7 +43,8 @@ vectors = st.one_of(st.lists(numbers, max_size=10), st.lists(st.lists(numbers, m
 
 
 def good_camera(i):
-    return {"name": f"cam{i}", "size": [640, 480], "matrix": [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]],
+    return {"name": f"cam{i}", "size": [640, 480],
+            "matrix": [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]],
             "distortions": [0.0] * 5, "rotation": [0.0, 0.0, 0.0], "translation": [float(i), 0.0, 3.0]}
 
 
@@ -173,7 +176,8 @@ def test_capture_loader_loads_or_refuses(kinds, noise, with_plate, calibration):
             cam["size"] = [W, H]
             if calibration == "no_size":
                 cam.pop("size")
-        (folder / "calibration.toml").write_text(toml_text(cams, {}) if calibration != "text" else noise.decode("latin-1"))
+        text = toml_text(cams, {}) if calibration != "text" else noise.decode("latin-1")
+        (folder / "calibration.toml").write_text(text)
         videos = folder / "videos"
         videos.mkdir()
         for cam, kind in zip(cams, kinds):
@@ -200,6 +204,6 @@ def test_capture_loader_loads_or_refuses(kinds, noise, with_plate, calibration):
         if capture is not None:
             try:  # every frame it says it has can be read, or refused in the project's words
                 for f in range(capture.frames.n_frames):
-                    loads_or_refuses(lambda: capture.frames.read(f))
+                    loads_or_refuses(lambda f=f: capture.frames.read(f))
             finally:
                 capture.close()

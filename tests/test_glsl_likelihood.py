@@ -6,7 +6,7 @@ skip only when that probe fails, with its reason.
 import numpy as np
 import pytest
 
-from markerless_mocap.core import likelihood as lk
+from markerless_mocap.core.energy import likelihood as lk
 from markerless_mocap.core import render
 from markerless_mocap.core.render import reference
 
@@ -36,7 +36,7 @@ def subject():
     if not subject_blend_path().is_file():
         pytest.skip(f"no sample subject at {subject_blend_path()} (set MOCAP_TEST_SUBJECT)")
     from markerless_mocap.addon.scene_bridge import body_from_blender
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.body.proxy import make_proxy
 
     arm, mesh = load_subject(bpy)
     body = body_from_blender(arm, mesh)

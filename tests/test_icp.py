@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from markerless_mocap.core.camera import Camera
+from markerless_mocap.core.capture.camera import Camera
 from markerless_mocap.core.optimizers import make_optimizer
 from markerless_mocap.core.optimizers.base import PoseSpace
 from markerless_mocap.core.optimizers.icp import (ContourField, IcpProblem, IcpProblemError, IcpSettings, IcpSolver,
                                                    IterativeClosestPoint, apply_increment, projection_jacobian)
-from markerless_mocap.core.proxy import make_proxy
+from markerless_mocap.core.body.proxy import make_proxy
 from markerless_mocap.core.render.rim import MeshEdges, depth_buffer, rim_vertices
-from markerless_mocap.core.rotations import matrix_to_rotvec, rotvec_to_matrix
+from markerless_mocap.core.body.rotations import matrix_to_rotvec, rotvec_to_matrix
 
 from rig_helpers import load_subject
 
@@ -334,7 +334,7 @@ def test_twist_jacobian_matches_finite_differences(subject):
 
 
 def test_numba_vertex_jacobian_equals_the_numpy_reference(subject):
-    from markerless_mocap.core import fast_jacobian
+    from markerless_mocap.core.optimizers import jacobian_fast as fast_jacobian
     from markerless_mocap.core.optimizers.icp import descendant_matrix, vertex_jacobian_reference
 
     body, proxy, space, x_true, cams, sils = subject
@@ -448,7 +448,8 @@ def test_prior_gradient_pulls_towards_its_mode_and_anchor_is_respected(subject):
                            IcpSettings(prior_weight=weight))
         pose = to_absolute(solver.fit(to_relative(x0)).pose[None])[0]
         errors[weight] = joint_error_mm(body, pose, x_true)
-    print(f"\nICP with anchor: error without prior {errors[0.0]:.1f} mm, with a prior at the truth {errors[200.0]:.1f} mm")
+    print(f"\nICP with anchor: error without prior {errors[0.0]:.1f} mm, "
+          f"with a prior at the truth {errors[200.0]:.1f} mm")
     assert prior.calls > 0
     assert errors[0.0] < 0.45 * joint_error_mm(body, x0, x_true)  # the chart change does not break the fit
     assert errors[200.0] < 0.7 * errors[0.0]

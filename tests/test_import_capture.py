@@ -25,7 +25,7 @@ def _look_at(center, target, up=(0.0, 0.0, 1.0)):
 
 
 def _cameras():
-    from markerless_mocap.core.camera import Camera
+    from markerless_mocap.core.capture.camera import Camera
 
     cams = []
     for name, center, f, cx, cy, dist in (

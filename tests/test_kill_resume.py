@@ -6,12 +6,13 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from scene_helpers import scene_dir
+from scene_helpers import cli_environment, scene_dir
+
+from markerless_mocap.core.tracking import checkpoint
 
 pytest.importorskip("bpy")
 if os.name != "posix":
@@ -27,15 +28,6 @@ def _track_command(out, *extra):
             "--iterations", "3", "--seed", "5", "--no-export", "--no-overlays", *extra]
 
 
-def _environment():
-    import markerless_mocap
-
-    env = dict(os.environ)
-    package_parent = str(Path(markerless_mocap.__path__[0]).parent)  # where `markerless_mocap` imports from
-    env["PYTHONPATH"] = os.pathsep.join([package_parent, env.get("PYTHONPATH", "")])
-    return env
-
-
 def _saved_frames(out):
     try:
         with np.load(out / "poses.npz") as data:
@@ -45,7 +37,7 @@ def _saved_frames(out):
 
 
 def test_sigkill_then_resume_gives_the_uninterrupted_poses(tmp_path):
-    env = _environment()
+    env = cli_environment()
     full_out, killed_out = tmp_path / "full", tmp_path / "killed"
     full = subprocess.Popen(_track_command(full_out), env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     victim = subprocess.Popen(_track_command(killed_out), env=env, stdout=subprocess.DEVNULL,
@@ -64,10 +56,12 @@ def test_sigkill_then_resume_gives_the_uninterrupted_poses(tmp_path):
     saved = _saved_frames(killed_out)
     assert KILL_AFTER <= len(saved) < 6, saved  # killed part-way
     leftovers = [p.name for p in killed_out.iterdir() if ".partial" in p.name]
-    for name in ("poses.npz", "joints.npz", "checkpoint.pkl"):  # whatever the kill interrupted, each file loads
+    for name in ("poses.npz", "joints.npz", "checkpoint.npz"):  # whatever the kill interrupted, each file loads
         assert (killed_out / name).exists()
     with np.load(killed_out / "joints.npz") as joints:
         assert len(joints["frames"]) in (len(saved), len(saved) - 1, len(saved) + 1)
+    estimates, _, _ = checkpoint.read(killed_out / "checkpoint.npz")  # written after poses.npz: a frame behind at most
+    assert [e.frame for e in estimates] in (saved, saved[:-1])
 
     resumed = subprocess.run(_track_command(killed_out, "--resume"), env=env, capture_output=True, text=True,
                              timeout=240)

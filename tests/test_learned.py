@@ -8,9 +8,8 @@ import pytest
 
 from scene_helpers import ground_truth_poses, scene_dir
 
-from markerless_mocap.core.features.learned import (INPUT_SIZE, CropBox, LandmarkModel, LearnedModelError,
-                                                     ViewEvidence, crop_around, crop_image, locate,
-                                                     mask_at_size, mask_to_image)
+from markerless_mocap.core.evidence.learned import (INPUT_SIZE, CropBox, LandmarkModel, LearnedModelError, ViewEvidence,
+                                                    crop_around, crop_image, locate, mask_at_size, mask_to_image)
 
 LIMB_LANDMARKS = {11: "LeftArm", 12: "RightArm", 13: "LeftForeArm", 14: "RightForeArm", 15: "LeftHand",
                   16: "RightHand", 23: "LeftUpLeg", 24: "RightUpLeg", 25: "LeftLeg", 26: "RightLeg",
@@ -75,7 +74,7 @@ def test_missing_model_file_names_the_fix(tmp_path):
 def walk_frame():
     pytest.importorskip("bpy")
     from markerless_mocap.core.capture.capture import load_capture
-    from markerless_mocap.core.results import load_joints
+    from markerless_mocap.core.results.result_folder import load_joints
 
     capture = load_capture(scene_dir("walk"))
     names, _, positions = load_joints(scene_dir("walk") / "gt_joints.npz")
@@ -126,7 +125,7 @@ def test_a_crop_without_the_person_is_found_again_or_given_up(walk_frame):
 def walk_truth():
     pytest.importorskip("bpy")
     from markerless_mocap.core.capture.capture import load_capture
-    from markerless_mocap.core.keypoints import rig_keypoints
+    from markerless_mocap.core.evidence.keypoints import rig_keypoints
 
     body, frames, poses, _ = ground_truth_poses("walk")
     capture = load_capture(scene_dir("walk"))
@@ -149,8 +148,8 @@ def synthetic_evidence(body, pose, cameras, rig_points, noise_px=0.0, seed=0):
 
 
 def keypoint_term(body, cameras, evidence, poses):
-    from markerless_mocap.core.features.learned import CROP_MARGIN
-    from markerless_mocap.core.keypoints import KeypointTargets, keypoint_energy, rig_keypoints
+    from markerless_mocap.core.evidence.learned import CROP_MARGIN
+    from markerless_mocap.core.evidence.keypoints import KeypointTargets, keypoint_energy, rig_keypoints
 
     rig = rig_keypoints(body)
     targets = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN)
@@ -164,8 +163,8 @@ def test_rig_points_sit_at_the_joints_moved_by_the_landmark_offsets(walk_truth):
     """Each limb landmark's rig point is its joint moved by LANDMARK_OFFSETS in the bone's frame: in the
     rest pose by exactly the table's (outwards, forwards, up) x trunk, mirrored for the right side; posed,
     at the same distance from its joint (the bone carries it rigidly)."""
-    from markerless_mocap.core.body import body_frame
-    from markerless_mocap.core.keypoints import LANDMARK_OFFSETS
+    from markerless_mocap.core.body.model import body_frame
+    from markerless_mocap.core.evidence.keypoints import LANDMARK_OFFSETS
 
     body, poses, cameras, rig = walk_truth
     sk = body.skeleton
@@ -220,11 +219,11 @@ def test_keypoint_term_prefers_the_truth_to_perturbations(walk_truth):
 
 
 def test_fast_keypoint_term_matches_the_numpy_reference(walk_truth):
-    """core/fast_keypoints.py against keypoints.keypoint_energy_reference (1e-12): noisy landmarks with second
+    """core/evidence/keypoints_fast.py against keypoints.keypoint_energy_reference (1e-12): noisy landmarks with second
     guesses, a view with its sides swapped, a view without landmarks, poses near and far from the truth."""
-    from markerless_mocap.core.features.learned import CROP_MARGIN, SWAP_ORDER
-    from markerless_mocap.core.fast_keypoints import keypoint_energy as fast
-    from markerless_mocap.core.keypoints import KEYPOINT_SIGMA, KeypointTargets, keypoint_energy_reference
+    from markerless_mocap.core.evidence.learned import CROP_MARGIN, SWAP_ORDER
+    from markerless_mocap.core.evidence.keypoints_fast import keypoint_energy as fast
+    from markerless_mocap.core.evidence.keypoints import KEYPOINT_SIGMA, KeypointTargets, keypoint_energy_reference
 
     body, poses, cameras, rig = walk_truth
     rng = np.random.default_rng(8)
@@ -251,7 +250,7 @@ def test_fast_keypoint_term_matches_the_numpy_reference(walk_truth):
 
 
 def test_a_view_with_swapped_sides_does_not_pull_the_fit(walk_truth):
-    from markerless_mocap.core.features.learned import SWAP_ORDER
+    from markerless_mocap.core.evidence.learned import SWAP_ORDER
 
     body, poses, cameras, rig = walk_truth
     truth = poses[20]
@@ -283,10 +282,10 @@ def test_views_without_landmarks_are_left_out(walk_truth):
 def test_first_frame_from_keypoints_recovers_the_pose(walk_truth):
     """Landmarks with 3 px noise, one view's sides swapped, the start 15 cm and 20 degrees off in a neutral
     posture: the fitted pose's joints within 40 mm of the truth on average (measured about 20 mm)."""
-    from markerless_mocap.core.features.learned import CROP_MARGIN, SWAP_ORDER
-    from markerless_mocap.core.keypoint_fit import pose_from_keypoints
-    from markerless_mocap.core.keypoints import KeypointTargets
-    from markerless_mocap.core.rotations import matrix_to_rotvec, rotvec_to_matrix
+    from markerless_mocap.core.evidence.learned import CROP_MARGIN, SWAP_ORDER
+    from markerless_mocap.core.evidence.keypoint_fit import pose_from_keypoints
+    from markerless_mocap.core.evidence.keypoints import KeypointTargets
+    from markerless_mocap.core.body.rotations import matrix_to_rotvec, rotvec_to_matrix
 
     body, poses, cameras, rig = walk_truth
     truth = poses[30]
@@ -347,7 +346,7 @@ def _swaps_by_trying_each(cameras, uv, weight, swap, min_weight):
 def test_batched_triangulation_and_swaps_match_the_one_point_at_a_time_reference(walk_truth):
     """keypoint_fit's batched DLT and swap search against the plain loops above, on landmarks with noise,
     dropped detections and whole views whose sides are swapped: the same swaps, the same points (1e-9 m)."""
-    from markerless_mocap.core.keypoint_fit import MIN_WEIGHT, resolve_swaps, triangulate
+    from markerless_mocap.core.evidence.keypoint_fit import MIN_WEIGHT, resolve_swaps, triangulate
 
     body, poses, cameras, rig = walk_truth
     rng = np.random.default_rng(3)
@@ -375,11 +374,11 @@ def test_batched_triangulation_and_swaps_match_the_one_point_at_a_time_reference
 def test_icp_keypoint_gradient_matches_finite_differences(walk_truth):
     """The analytic keypoint block of ICP's normal equations: its gradient equals the numerical one of
     the keypoint cost (a Huber threshold wide enough that every residual is in its quadratic zone)."""
-    from markerless_mocap.core.features.learned import CROP_MARGIN
-    from markerless_mocap.core.keypoints import KeypointTargets
+    from markerless_mocap.core.evidence.learned import CROP_MARGIN
+    from markerless_mocap.core.evidence.keypoints import KeypointTargets
     from markerless_mocap.core.optimizers import PoseSpace
     from markerless_mocap.core.optimizers.icp import IcpProblem, IcpSettings, IcpSolver
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.body.proxy import make_proxy
 
     body, poses, cameras, rig = walk_truth
     truth = poses[20]
@@ -406,7 +405,7 @@ def test_icp_keypoint_gradient_matches_finite_differences(walk_truth):
 def test_energy_resolution_follows_the_person_not_the_footage(walk_truth):
     """The walk keeps the 0.5 its figures were measured at; the same views filmed at 3x the resolution get a
     third of it, so the person spans the same number of energy pixels."""
-    from markerless_mocap.core.likelihood import ENERGY_PERSON_PX, energy_scale_for
+    from markerless_mocap.core.energy.likelihood import ENERGY_PERSON_PX, energy_scale_for
 
     body, poses, cameras, _ = walk_truth
     assert energy_scale_for(body, cameras, poses[0]) == 0.5
@@ -419,7 +418,7 @@ def test_energy_resolution_follows_the_person_not_the_footage(walk_truth):
 
 def test_track_without_the_model_file_says_so_and_how_to_fix_it(tmp_path, monkeypatch, capsys):
     pytest.importorskip("bpy")
-    from markerless_mocap.core.features import learned
+    from markerless_mocap.core.evidence import learned
     from markerless_mocap.operators.cli import main
 
     monkeypatch.setattr(learned, "MODEL_PATH", tmp_path / "missing.tflite")
@@ -433,9 +432,10 @@ def test_track_without_the_model_file_says_so_and_how_to_fix_it(tmp_path, monkey
 def test_agreement_figures_of_a_model_on_and_off_the_person(walk_truth):
     """Coverage, IoU and keypoint distance: 1, 1 and 0 px for evidence made from the model itself; a model
     30 cm to the side of that person loses coverage and is tens of pixels from the landmarks."""
-    from markerless_mocap.core.evidence_agreement import view_agreement
-    from markerless_mocap.core.overlay import contact_sheet, model_mask
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.evidence.agreement import view_agreement
+    from markerless_mocap.core.render.model_mask import model_mask
+    from markerless_mocap.core.results.overlay import contact_sheet
+    from markerless_mocap.core.body.proxy import make_proxy
 
     body, poses, cameras, rig = walk_truth
     proxy = make_proxy(body)
@@ -458,9 +458,9 @@ def test_agreement_figures_of_a_model_on_and_off_the_person(walk_truth):
 def test_triangulation_baseline_of_exact_landmarks_is_exact(walk_truth, tmp_path):
     """keypoints.npz holding the true joints' projections (one view's sides swapped) triangulates back onto
     the truth: the baseline's error is the landmarks' own, not the code's."""
-    from markerless_mocap.core.evaluation import TRIANGULATION_JOINTS, triangulation_errors
-    from markerless_mocap.core.features.learned import SWAP_ORDER
-    from markerless_mocap.core.results import load_joints
+    from markerless_mocap.core.results.evaluation import TRIANGULATION_JOINTS, triangulation_errors
+    from markerless_mocap.core.evidence.learned import SWAP_ORDER
+    from markerless_mocap.core.results.result_folder import load_joints
 
     body, poses, cameras, rig = walk_truth
     truth = scene_dir("walk") / "gt_joints.npz"
@@ -492,7 +492,7 @@ def _blob(cx, cy, peak, size=64, width=1.5):
 
 
 def test_heatmap_alternatives_find_the_runner_up_peak():
-    from markerless_mocap.core.features.learned import heatmap_alternatives
+    from markerless_mocap.core.evidence.learned import heatmap_alternatives
 
     heat = np.full((3, 64, 64), -20.0, np.float32)
     heat[0] = np.maximum(_blob(20.5, 30.5, 1.0), _blob(44.5, 12.5, 0.2))   # runner-up 0.8 logits down
@@ -531,7 +531,7 @@ def _alternatives_one_landmark_at_a_time(heat, regressed, n, max_gap, min_distan
 def test_heatmap_alternatives_match_the_one_landmark_at_a_time_reference():
     """The all-landmarks-at-once second guesses against the plain loop above, on smooth random heatmaps with
     many peaks near the top (equal to 1e-6 crop pixels and logits)."""
-    from markerless_mocap.core.features.learned import (ALTERNATIVE_MAX_GAP, ALTERNATIVE_MIN_DISTANCE, ALTERNATIVES,
+    from markerless_mocap.core.evidence.learned import (ALTERNATIVE_MAX_GAP, ALTERNATIVE_MIN_DISTANCE, ALTERNATIVES,
                                                         heatmap_alternatives)
 
     rng = np.random.default_rng(4)
@@ -554,9 +554,9 @@ def test_a_pose_on_a_second_guess_costs_little_more_than_on_the_landmark(walk_tr
     the true place as the heatmap's runner-up 0.4 logits down: the truth costs that view 0.1 more
     (ALTERNATIVE_COST_PER_LOGIT x 0.4), not an outlier's ~1, and ICP compares the wrist with the second
     guess where the pose puts it there."""
-    from markerless_mocap.core.features.learned import CROP_MARGIN
-    from markerless_mocap.core.keypoints import (ALTERNATIVE_COST_PER_LOGIT, KeypointTargets, chosen_targets,
-                                                 keypoint_energy)
+    from markerless_mocap.core.evidence.learned import CROP_MARGIN
+    from markerless_mocap.core.evidence.keypoints import (ALTERNATIVE_COST_PER_LOGIT, KeypointTargets, chosen_targets,
+                                                          keypoint_energy)
 
     body, poses, cameras, rig = walk_truth
     truth = poses[20]
@@ -589,7 +589,7 @@ def test_landmark_offsets_table_is_what_the_measuring_tool_finds():
     pytest.importorskip("bpy")
     import importlib.util
 
-    from markerless_mocap.core.keypoints import LANDMARK_OFFSETS
+    from markerless_mocap.core.evidence.keypoints import LANDMARK_OFFSETS
 
     repo = Path(__file__).resolve().parents[1]
     spec = importlib.util.spec_from_file_location("landmark_offsets", repo / "tools" / "landmark_offsets.py")

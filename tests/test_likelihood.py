@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from markerless_mocap.core import likelihood as lk
-from markerless_mocap.core.camera import Camera
-from markerless_mocap.core.features.view_features import ViewFeatures, distance_to_mask
-from markerless_mocap.core.rotations import rotvec_to_matrix
+from markerless_mocap.core.energy import likelihood as lk
+from markerless_mocap.core.capture.camera import Camera
+from markerless_mocap.core.evidence.view_features import ViewFeatures, distance_to_mask
+from markerless_mocap.core.body.rotations import rotvec_to_matrix
 
 from test_render import look_at
 
@@ -155,7 +155,7 @@ def test_features_at_capture_resolution_are_resampled_to_the_same_energy():
 
 
 def test_weighted_sum_and_batch_equal_single_calls():
-    from markerless_mocap.core.prior import AnatomicalPrior
+    from markerless_mocap.core.energy.prior import AnatomicalPrior
 
     prior = AnatomicalPrior.fit(np.random.default_rng(1).normal(0, 0.3, (50, 6)), {"a": [0, 1, 2], "b": [3, 4, 5]})
     w = lk.LikelihoodWeights(silh=3, silh_ch=0.5, edge=2, edge_ch=1.5, color=7, anat=0.25)
@@ -201,7 +201,7 @@ def test_fast_and_reference_energies_agree_on_the_body(bpy_module):
         pytest.skip(f"no sample subject at {subject_blend_path()} (set MOCAP_TEST_SUBJECT)")
 
     from markerless_mocap.addon.scene_bridge import body_from_blender
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.body.proxy import make_proxy
 
     arm, mesh = load_subject(bpy_module)
     body = body_from_blender(arm, mesh)

@@ -1,9 +1,9 @@
-"""The first frame's limb-by-limb search (core/limb_search.py) on a synthetic energy with known minima."""
+"""The first frame's limb-by-limb search (core/tracking/limb_search.py) on a synthetic energy with known minima."""
 from types import SimpleNamespace
 
 import numpy as np
 
-from markerless_mocap.core.limb_search import limb_dofs, search_limbs
+from markerless_mocap.core.tracking.limb_search import limb_dofs, search_limbs
 from markerless_mocap.core.optimizers import PoseSpace
 
 ROLES = ["root"] * 6 + ["spine"] * 3 + ["neck"] * 3 + ["l_shoulder"] * 3 + ["r_shoulder"] * 3 + \

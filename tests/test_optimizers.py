@@ -212,7 +212,7 @@ def test_isa_eps_selection_keeps_the_best_particle():
     x0 = perturbed_start(2, spread=2.0)
     opt = make_optimizer("isa", SPACE, seed=4)
     opt.start(x0)
-    for frame in range(3):
+    for _frame in range(3):
         r = opt.track_frame(energy, [x0])
         vmins = np.array(r.info["min_energy_per_iteration"])
         assert np.all(np.diff(vmins) <= 0.0), vmins

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from markerless_mocap.core.prior import AnatomicalPrior, PriorError, second_neighbour_bandwidth
+from markerless_mocap.core.energy.prior import AnatomicalPrior, PriorError, second_neighbour_bandwidth
 
 
 def test_bandwidth_is_the_largest_second_nearest_neighbour_distance():
@@ -111,7 +111,7 @@ def test_bad_training_data_and_files_give_clear_errors(tmp_path):
 
 
 def test_from_motion_maps_frames_spread_over_every_clip(monkeypatch):
-    from markerless_mocap.core import motion_to_dof
+    from markerless_mocap.core.mocap import to_dof as motion_to_dof
 
     class Clip:
         def __init__(self, n, offset):

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from markerless_mocap.core.capture.calibration import read_calibration
-from markerless_mocap.core.keypoints import rig_keypoints
-from markerless_mocap.core.proportions import Proportions, ProportionsError, scaled_body, segment_lengths
-from markerless_mocap.core.proportions_fit import fit_proportions, proportions_for_lengths
+from markerless_mocap.core.evidence.keypoints import rig_keypoints
+from markerless_mocap.core.actor.proportions import Proportions, ProportionsError, scaled_body, segment_lengths
+from markerless_mocap.core.actor.landmark_fit import fit_proportions, proportions_for_lengths
 
 from scene_helpers import ground_truth_poses, scene_dir
 
@@ -98,7 +98,7 @@ def test_fit_recovers_known_proportions_from_landmarks(walk):
 def test_measured_lengths_replace_the_calibrated_ones(walk):
     """A measured forearm gives the body exactly that forearm and leaves every other segment as calibrated; a
     measured height scales the whole body to it first; with sided factors both sides take the measurement."""
-    from markerless_mocap.core.measured_lengths import measured_proportions
+    from markerless_mocap.core.actor.measured_lengths import measured_proportions
 
     body, _ = walk
     before = segment_lengths(scaled_body(body, ACTOR))
@@ -129,7 +129,7 @@ def test_lengths_carry_over_to_another_rig(walk):
 def _synthetic_masks(actor, cameras, poses):
     """The actor's silhouettes (its mesh simplified to 8000 triangles, not the tracker's 2000) per frame and view."""
     from markerless_mocap.core import render
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.body.proxy import make_proxy
 
     proxy = make_proxy(actor, 8000)
     verts = proxy.deform(actor, poses)
@@ -145,8 +145,8 @@ def test_silhouettes_find_the_forearm_and_hips_the_landmarks_missed(walk):
     from the body a landmark fit that missed both would give (every segment at 0.92), at the true poses:
     the forearm and hip width come out within 3 % of the truth, the mask mismatch drops, and the segments
     the masks do not refine keep the landmark fit's length. From the truth itself, nothing moves beyond 1 %."""
-    from markerless_mocap.core.proportions_silhouette import SILHOUETTE_SEGMENTS, refine_proportions
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.actor.silhouette_fit import SILHOUETTE_SEGMENTS, refine_proportions
+    from markerless_mocap.core.body.proxy import make_proxy
 
     body, poses = walk
     truth = Proportions({"forearm": 0.92 * 1.10, "hip_width": 0.92 * 0.90}, 0.92)
@@ -175,8 +175,8 @@ def test_a_length_the_masks_push_past_the_bound_keeps_the_landmark_fit(walk):
     """Masks of forearms 25 % longer than the start (more than the landmarks were ever seen to miss): the
     optimum lies at the bound around the landmark fit, so the forearm keeps the landmark length and is
     reported as kept, while the hip width (10 % off) is still refined."""
-    from markerless_mocap.core.proportions_silhouette import SILHOUETTE_SEGMENTS, refine_proportions
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.actor.silhouette_fit import SILHOUETTE_SEGMENTS, refine_proportions
+    from markerless_mocap.core.body.proxy import make_proxy
 
     body, poses = walk
     truth = Proportions({"forearm": 0.92 * 1.25, "hip_width": 0.92 * 0.90}, 0.92)
@@ -192,14 +192,14 @@ def test_a_length_the_masks_push_past_the_bound_keeps_the_landmark_fit(walk):
 
 
 def test_the_masks_choose_between_the_rig_and_the_halfway_body(walk):
-    """The choice of core/calibration_check.py on synthetic masks, each body's poses refitted from the true ones
+    """The choice of core/actor/body_choice.py on synthetic masks, each body's poses refitted from the true ones
     pushed off by a few degrees: masks of the rig itself rank the rig above a body 8 % larger; masks of an actor
     8 % smaller rank that body above the rig. The halfway body takes each segment's deviation from the uniform
     scale to the fitted height halfway; keep_chosen gives the chosen body and keeps the fit on record."""
-    from markerless_mocap.core.calibration_check import (BodyComparison, candidate_bodies, keep_chosen, mask_mismatch,
+    from markerless_mocap.core.actor.body_choice import (BodyComparison, candidate_bodies, keep_chosen, mask_mismatch,
                                                          uniform_body)
-    from markerless_mocap.core.proportions_fit import ProportionsFit
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.actor.landmark_fit import ProportionsFit
+    from markerless_mocap.core.body.proxy import make_proxy
 
     body, poses = walk
     cameras = [c.scaled(0.5) for c in read_calibration(scene_dir("walk"))]
@@ -247,8 +247,8 @@ def test_the_body_choice_scores_each_body_once(walk, monkeypatch):
     scoring every body afresh."""
     from types import SimpleNamespace
 
-    from markerless_mocap.core import calibration_check
-    from markerless_mocap.core.proportions_fit import ProportionsFit
+    from markerless_mocap.core.actor import body_choice as calibration_check
+    from markerless_mocap.core.actor.landmark_fit import ProportionsFit
 
     body, poses = walk
     fitted = Proportions({"spine": 1.06, "thigh": 0.95, "forearm": 1.04, "hip_width": 0.97}, 1.0)
@@ -277,12 +277,12 @@ def test_the_body_choice_scores_each_body_once(walk, monkeypatch):
 
 
 def test_the_masks_find_the_trunk_leg_split(walk):
-    """core/trunk_leg_split.py: a trade keeps spine + thigh (the standing height) and changes the spine by exp(t);
+    """core/actor/trunk_leg_split.py: a trade keeps spine + thigh (the standing height) and changes the spine by exp(t);
     on synthetic masks of an actor whose spine is 6 % shorter and thighs longer by the same length, the search
     from the rig's split finds it within 2 % (each candidate's poses refitted from the true ones pushed off)."""
-    from markerless_mocap.core.calibration_check import mask_mismatch
-    from markerless_mocap.core.proxy import make_proxy
-    from markerless_mocap.core.trunk_leg_split import split_by_masks, traded
+    from markerless_mocap.core.actor.body_choice import mask_mismatch
+    from markerless_mocap.core.body.proxy import make_proxy
+    from markerless_mocap.core.actor.trunk_leg_split import split_by_masks, traded
 
     body, poses = walk
     rig = segment_lengths(body)
@@ -307,12 +307,12 @@ def test_the_masks_find_the_trunk_leg_split(walk):
 
 
 def test_the_masks_find_the_hip_width(walk):
-    """core/hip_width_by_masks.py: on synthetic masks of an actor whose hips are 7 % narrower, the search from the
+    """core/actor/hip_width_by_masks.py: on synthetic masks of an actor whose hips are 7 % narrower, the search from the
     rig's hip width finds it within 2.5 % (each candidate's poses refitted from the true ones pushed off); only the
     hip width moves."""
-    from markerless_mocap.core.calibration_check import mask_mismatch
-    from markerless_mocap.core.hip_width_by_masks import hip_width_by_masks, widened
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.actor.body_choice import mask_mismatch
+    from markerless_mocap.core.actor.hip_width_by_masks import hip_width_by_masks, widened
+    from markerless_mocap.core.body.proxy import make_proxy
 
     body, poses = walk
     start = Proportions({"spine": 1.0, "hip_width": 1.0, "thigh": 1.0}, 1.0)
@@ -330,12 +330,12 @@ def test_the_masks_find_the_hip_width(walk):
 
 
 def test_the_masks_read_the_height_where_the_landmarks_misread_it(walk):
-    """core/height_by_masks.py: on synthetic masks of an actor whose segments are all 5 % longer, the scan from the
-    rig puts the height within 1.5 % of the actor's and, the two more than 3 % apart, takes it; on masks of the
-    rig itself it stays within the gate and is not taken. taller keeps the head, hands and girth."""
-    from markerless_mocap.core.calibration_check import mask_mismatch
-    from markerless_mocap.core.height_by_masks import height_by_masks, taller
-    from markerless_mocap.core.proxy import make_proxy
+    """core/actor/height_by_masks.py: on synthetic masks of an actor whose segments are all 5 % longer, the scan
+    from the rig puts the height within 1.5 % of the actor's and, the two more than 3 % apart, takes it; on masks
+    of the rig itself it stays within the gate and is not taken. taller keeps the head, hands and girth."""
+    from markerless_mocap.core.actor.body_choice import mask_mismatch
+    from markerless_mocap.core.actor.height_by_masks import height_by_masks, taller
+    from markerless_mocap.core.body.proxy import make_proxy
 
     body, poses = walk
     start = Proportions({k: 1.0 for k in ("spine", "neck", "shoulder_width", "hip_width", "upper_arm", "forearm",
@@ -349,18 +349,17 @@ def test_the_masks_read_the_height_where_the_landmarks_misread_it(walk):
     proxy = make_proxy(body, 2000)
     for masks_of, expected, taken in ((actor, truth, True), (start, segment_lengths(body)["height"], False)):
         masks = _synthetic_masks(scaled_body(body, masks_of), cameras, poses[frames])
-        found = height_by_masks(body, start, lambda bodies: mask_mismatch(body, proxy, cameras, masks,
-                                                                          [(p, pushed) for p in bodies],
-                                                                          backend="fast"))
+        found = height_by_masks(body, start, lambda bodies, masks=masks: mask_mismatch(
+            body, proxy, cameras, masks, [(p, pushed) for p in bodies], backend="fast"))
         assert found["landmark_height_m"] == pytest.approx(segment_lengths(body)["height"])
         assert found["masks_height_m"] == pytest.approx(expected, rel=0.015), found["grid"]
         assert found["taken"] is taken, found
 
 
 def test_a_line_search_refines_inside_the_grid_and_stops_at_its_end():
-    """core/mask_line_search.py on a known parabola: the vertex between grid points is found exactly; a cost
+    """core/actor/mask_line_search.py on a known parabola: the vertex between grid points is found exactly; a cost
     still falling at the grid's end gives no move, and pinned_down says so (keys as saved in actor.json too)."""
-    from markerless_mocap.core.mask_line_search import pinned_down, search_line
+    from markerless_mocap.core.actor.mask_line_search import pinned_down, search_line
 
     def costs(points):
         return [(p - 0.041) ** 2 for p in points]

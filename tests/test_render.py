@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from markerless_mocap.core import render
-from markerless_mocap.core.camera import Camera
+from markerless_mocap.core.capture.camera import Camera
 from markerless_mocap.core.render import fast, reference
 
 
@@ -246,9 +246,9 @@ def test_fast_path_equals_reference_on_random_poses_and_views_of_different_sizes
     poses.append(verts + [0, 0, 10])  # out of every view
     uv, z = render.project_views(np.array(poses), cams)
     capped = dataclasses.replace(targets, chamfer_cap=4.0)
-    for cull, targets in ((0, targets), (1, targets), (-1, targets), (0, capped)):
-        s_ref, h_ref = reference.statistics(uv, z, faces, labels, targets, True, 3, cull)
-        s_fast, h_fast = fast.statistics(uv, z, faces, labels, targets, True, 3, cull)
+    for cull, case_targets in ((0, targets), (1, targets), (-1, targets), (0, capped)):
+        s_ref, h_ref = reference.statistics(uv, z, faces, labels, case_targets, True, 3, cull)
+        s_fast, h_fast = fast.statistics(uv, z, faces, labels, case_targets, True, 3, cull)
         assert np.array_equal(s_ref[..., render.TEMPLATE], s_fast[..., render.TEMPLATE])
         assert np.allclose(s_ref, s_fast, rtol=1e-12, atol=1e-9)
         assert np.array_equal(h_ref, h_fast)
@@ -290,12 +290,13 @@ def test_fast_path_matches_reference_on_the_body_at_the_energy_resolution(bpy_mo
         pytest.skip(f"no sample subject at {subject_blend_path()} (set MOCAP_TEST_SUBJECT)")
 
     from markerless_mocap.addon.scene_bridge import body_from_blender
-    from markerless_mocap.core.proxy import make_proxy
+    from markerless_mocap.core.body.proxy import make_proxy
 
     arm, mesh = load_subject(bpy_module)
     body = body_from_blender(arm, mesh)
     proxy = make_proxy(body, 2000)
-    cams = [look_at(f"c{i}", [3.5 * np.cos(a), 3.5 * np.sin(a), 1.2], body.default_pose()[:3], 550, 640, 480).scaled(0.5)
+    cams = [look_at(f"c{i}", [3.5 * np.cos(a), 3.5 * np.sin(a), 1.2], body.default_pose()[:3], 550, 640,
+                    480).scaled(0.5)
             for i, a in enumerate(np.deg2rad([20, 110, 200, 290]))]
     rng = np.random.default_rng(4)
     targets = random_blob_targets(cams, rng)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from markerless_mocap.core import atomic_files
-from markerless_mocap.core.results import ResultWriteError, ResultWriter
-from markerless_mocap.core.tracking import FrameEstimate, TrackingSettings
+from markerless_mocap.core.results.result_folder import ResultWriteError, ResultWriter
+from markerless_mocap.core.tracking.settings import FrameEstimate, TrackingSettings
 
 
 @dataclass
@@ -44,7 +44,7 @@ def test_every_result_file_is_renamed_into_place(tmp_path, monkeypatch):
     writer = _writer(tmp_path / "out")
     writer.add(_estimate(0), tracker_state={"rng": 1})
     on_disk = sorted(p.name for p in (tmp_path / "out").iterdir())
-    assert on_disk == ["checkpoint.pkl", "joints.npz", "poses.npz", "report.json"]
+    assert on_disk == ["checkpoint.npz", "joints.npz", "poses.npz", "report.json"]
     assert sorted(renamed) == on_disk  # each one written under another name and renamed: none in place
 
 
@@ -110,7 +110,7 @@ def test_track_stops_in_one_line_when_the_disk_fills(tmp_path, monkeypatch, caps
     pytest.importorskip("bpy")
     from scene_helpers import scene_dir
 
-    from markerless_mocap.core import results
+    from markerless_mocap.core.results import result_folder as results
     from markerless_mocap.operators.cli import main
 
     real_write = results.ResultWriter.write

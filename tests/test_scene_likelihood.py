@@ -12,11 +12,11 @@ from scene_helpers import ground_truth_poses, scene_dir
 pytest.importorskip("bpy")
 
 from markerless_mocap.core.capture.capture import load_capture  # noqa: E402
-from markerless_mocap.core.features import BackgroundModel, compute_view_features, silhouette_iou  # noqa: E402
-from markerless_mocap.core.features.learned import LandmarkModel, crop_around, locate  # noqa: E402
-from markerless_mocap.core.likelihood import LIKELIHOODS, EnergyModel, default_pose_at  # noqa: E402
-from markerless_mocap.core.motion_library import build_motion_models, scene_exclusion  # noqa: E402
-from markerless_mocap.core.proxy import make_proxy  # noqa: E402
+from markerless_mocap.core.evidence import BackgroundModel, compute_view_features, silhouette_iou  # noqa: E402
+from markerless_mocap.core.evidence.learned import LandmarkModel, crop_around, locate  # noqa: E402
+from markerless_mocap.core.energy.likelihood import LIKELIHOODS, EnergyModel, default_pose_at  # noqa: E402
+from markerless_mocap.core.tracking.motion_library import build_motion_models, scene_exclusion  # noqa: E402
+from markerless_mocap.core.body.proxy import make_proxy  # noqa: E402
 
 SCENES = ("walk", "playground")
 

@@ -1,4 +1,4 @@
-"""Smoothing of a finished take (core/smoothing.py): the filter's measured response, the root orientation
+"""Smoothing of a finished take (core/tracking/smoothing.py): the filter's measured response, the root orientation
 through 180 degrees, gaps and short runs, joint limits, a cut-off the frame rate cannot carry, and a tracked
 take that is keyed, exported and saved smoothed with the solved poses kept, and smoothed again with another
 cut-off from the command line and from the Track panel without tracking again."""
@@ -7,8 +7,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from markerless_mocap.core.rotations import rotvec_to_matrix
-from markerless_mocap.core.smoothing import (MIN_RUN, SmoothingError, check_cutoff, consecutive_runs, smooth_poses)
+from markerless_mocap.core.body.rotations import rotvec_to_matrix
+from markerless_mocap.core.tracking.smoothing import (MIN_RUN, SmoothingError, check_cutoff, consecutive_runs,
+                                                      smooth_poses)
 
 FPS = 30.0
 

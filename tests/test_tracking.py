@@ -7,14 +7,16 @@ import os
 import numpy as np
 import pytest
 
-from scene_helpers import ground_truth_poses, load_scene_body, scene_dir
+from scene_helpers import ground_truth_poses, scene_dir
 
 bpy = pytest.importorskip("bpy")
 
 from markerless_mocap.core.capture.capture import load_capture  # noqa: E402
-from markerless_mocap.core.evaluation import joint_errors  # noqa: E402
-from markerless_mocap.core.motion_library import build_motion_models, scene_exclusion  # noqa: E402
-from markerless_mocap.core.tracking import Tracker, TrackingSettings, run_tracker  # noqa: E402
+from markerless_mocap.core.results.evaluation import joint_errors  # noqa: E402
+from markerless_mocap.core.tracking.motion_library import build_motion_models, scene_exclusion  # noqa: E402
+from markerless_mocap.core.tracking.observation import guide_before_search  # noqa: E402
+from markerless_mocap.core.tracking.settings import TrackingSettings  # noqa: E402
+from markerless_mocap.core.tracking.tracker import Tracker, run_tracker  # noqa: E402
 from markerless_mocap.operators.cli import main  # noqa: E402
 
 WALK = scene_dir("walk")
@@ -101,11 +103,11 @@ def test_refinement_lowers_the_energy_and_moves_the_particles(walk):
     tracker = make_tracker(walk, particles=20, iterations=2, seed=0)
     tracker.initialise(0, initial_pose=gt[0])
     tracker.track(1)
-    feats = tracker.load_frame(2)
+    tracker.load_frame(2)
     rng = np.random.default_rng(2)
     start = tracker.to_relative(gt[2] + rng.normal(0, 0.7, body.n_dof) * body.scale)
     particles = tracker.optimizer.particles.copy()
-    refined = tracker._refine(feats, start)
+    refined = tracker._refine(start)
     before, after = tracker._energy_fn(np.stack([start, refined]))
     errors = [joint_error_mm(body, tracker.to_absolute(p), gt[2]) for p in (start, refined)]
     print(f"energy {before:.3f} -> {after:.3f}; error {errors[0]:.1f} -> {errors[1]:.1f} mm")
@@ -153,7 +155,7 @@ def test_observing_the_next_frame_in_the_worker_changes_nothing(walk, observe_ea
                                observe_early=observe_early)
         ests = run_tracker(tracker, range(0, 5), initial_pose=walk["gt"][0])
         runs[prefetch] = np.stack([e.pose for e in ests])
-        assert tracker._pool is None and tracker._prefetched is None  # run_tracker stopped the worker
+        assert tracker.observer.stopped  # run_tracker stopped the worker
     np.testing.assert_array_equal(runs[True], runs[False])
 
 
@@ -165,7 +167,7 @@ def test_early_crops_carry_the_last_step_on_to_this_frame_and_the_next(walk):
     planned_frame, planned = tracker.next_guide  # planned before frame 2's search, from frames 0 and 1
     assert planned_frame == 3
     np.testing.assert_allclose(planned, [2 * x1 - x0, 3 * x1 - 2 * x0], atol=1e-9)
-    np.testing.assert_allclose(tracker._guide_before_search(), [2 * x2 - x1, 3 * x2 - 2 * x1], atol=1e-12)
+    np.testing.assert_allclose(guide_before_search([x1, x2]), [2 * x2 - x1, 3 * x2 - 2 * x1], atol=1e-12)
 
 
 def test_result_folder_files_all_load(tmp_path):
@@ -218,7 +220,7 @@ def test_bad_capture_gives_a_clear_error(tmp_path, capsys):
 
 def test_moving_the_root_anchor_keeps_every_stored_pose(walk):
     """Re-anchoring re-expresses particles and history, and leaves scales and floors alone."""
-    from markerless_mocap.core.rotations import rotvec_to_matrix
+    from markerless_mocap.core.body.rotations import rotvec_to_matrix
 
     tracker = make_tracker(walk, particles=20, iterations=2)
     tracker.initialise(0, initial_pose=walk["gt"][0])
@@ -230,7 +232,7 @@ def test_moving_the_root_anchor_keeps_every_stored_pose(walk):
     turned = tracker.history[-1].copy()
     turned[walk["body"].root_rotation_dofs] = [0.0, 0.0, 0.6]  # beyond the re-anchoring angle
     old_anchor = tracker.anchor.copy()
-    tracker._reanchor(turned)
+    tracker.history = tracker.root.follow(turned, opt, tracker.history)
     assert not np.allclose(tracker.anchor, old_anchor)
     np.testing.assert_allclose(tracker.anchor, rotvec_to_matrix(np.array([0, 0, 0.6])) @ old_anchor, atol=1e-12)
     after = tracker.to_absolute(opt.particles)
@@ -268,12 +270,12 @@ def test_compare_from_truth_needs_every_bone(tmp_path):
 
 def _frame_one_with_a_wrong_left_arm(walk, role, degrees):
     """Walk frame 1 loaded around the truth, and the true pose with the left `role` DOF turned by `degrees`
-    (within its limits): (tracker, features, the wrong pose relative, its energy, the per-view measure,
+    (within its limits): (tracker, the wrong pose relative, its energy, the per-view measure,
     the left wrist's distance from the truth for an absolute pose)."""
     body, gt = walk["body"], walk["gt"]
     tracker = make_tracker(walk, particles=20, iterations=2, seed=0)
     tracker.initialise(0, initial_pose=gt[0])
-    feats = tracker.load_frame(1, gt[1][None])
+    tracker.load_frame(1, gt[1][None])
     wrong = gt[1].copy()
     dof = [i for i, d in enumerate(body.dofs) if d.role == role][0]
     wrong[dof] = np.clip(wrong[dof] + np.deg2rad(degrees), body.lower[dof], body.upper[dof])
@@ -284,7 +286,7 @@ def _frame_one_with_a_wrong_left_arm(walk, role, degrees):
     def wrist_error(pose):
         return float(np.linalg.norm(body.joint_positions(pose[None])[0, wrist] - true_wrist))
 
-    return (tracker, feats, relative, float(tracker._energy_fn(relative[None])[0]), tracker._limbs_off(relative),
+    return (tracker, relative, float(tracker._energy_fn(relative[None])[0]), tracker.limb_recovery.limbs_off(relative),
             wrist_error)
 
 
@@ -292,12 +294,12 @@ def test_a_limb_off_its_landmarks_is_refitted_to_them(walk):
     """The keypoint proposal: an estimate whose left arm is swung 80 degrees away from the truth is
     refitted to the triangulated landmarks (and the local fit), kept because it lowers the energy, and
     brings the left wrist back near the truth."""
-    tracker, feats, relative, energy, off, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_shoulder", 80.0)
+    tracker, relative, energy, off, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_shoulder", 80.0)
     assert off["left arm"] > 0.1 and off["right arm"] < 0.1
-    fixed, fixed_energy, _ = tracker._keypoint_proposal(feats, relative, energy, 0, off)
+    fixed, fixed_energy, _ = tracker.limb_recovery.keypoint_proposal(relative, energy, 0, off)
     error = [wrist_error(tracker.to_absolute(p)) for p in (relative, fixed)]
     print(f"left wrist {1000 * error[0]:.0f} -> {1000 * error[1]:.0f} mm, energy {energy:.3f} -> {fixed_energy:.3f}")
-    assert fixed_energy < energy and tracker.proposals[-1] == {"limbs": ["left arm"], "kept": True}
+    assert fixed_energy < energy and tracker.limb_recovery.proposals[-1] == {"limbs": ["left arm"], "kept": True}
     assert error[1] < 0.06 < error[0]
 
 
@@ -305,16 +307,16 @@ def test_a_hand_off_in_3d_is_proposed_though_the_views_median_is_small(walk):
     """The elbow bent 45 degrees too far: the elbow's landmarks agree, so the per-view measure (a median
     over the elbow's and the wrist's views) stays under RECOVERY_DISTANCE, but the wrist lies more than
     RECOVERY_DISTANCE_3D from its triangulated landmark: the proposal is made, kept, and the wrist comes back."""
-    from markerless_mocap.core.tracking import RECOVERY_DISTANCE, RECOVERY_DISTANCE_3D
+    from markerless_mocap.core.tracking.limb_recovery import RECOVERY_DISTANCE, RECOVERY_DISTANCE_3D
 
-    tracker, feats, relative, energy, off, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_elbow", 45.0)
+    tracker, relative, energy, off, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_elbow", 45.0)
     before = wrist_error(tracker.to_absolute(relative))
     print(f"per-view measure {off['left arm']:.3f}, wrist {1000 * before:.0f} mm off")
     assert off["left arm"] < RECOVERY_DISTANCE and before > RECOVERY_DISTANCE_3D + 0.03
-    fixed, fixed_energy, _ = tracker._keypoint_proposal(feats, relative, energy, 0, off)
+    fixed, fixed_energy, _ = tracker.limb_recovery.keypoint_proposal(relative, energy, 0, off)
     after = wrist_error(tracker.to_absolute(fixed))
     print(f"left wrist {1000 * before:.0f} -> {1000 * after:.0f} mm, energy {energy:.3f} -> {fixed_energy:.3f}")
-    assert tracker.proposals[-1] == {"limbs": ["left arm"], "kept": True}
+    assert tracker.limb_recovery.proposals[-1] == {"limbs": ["left arm"], "kept": True}
     assert fixed_energy < energy and after < 0.06
 
 
@@ -323,11 +325,11 @@ def test_a_limb_far_from_its_landmarks_is_fitted_from_rest_as_well(walk):
     1: from the wrong pose alone the least squares stays stuck on some (an arm raised over the head kept the wrist
     0.21-0.55 m off; 8 of these 20 starts end more than 0.1 m off); started from rest as well, every one comes
     within 0.06 m of the truth."""
-    from markerless_mocap.core.keypoint_fit import fit_to_points, limb_landmark_fit, triangulated_landmarks
-    from markerless_mocap.core.limb_search import limb_dofs
+    from markerless_mocap.core.evidence.keypoint_fit import fit_to_points, limb_landmark_fit, triangulated_landmarks
+    from markerless_mocap.core.tracking.limb_search import limb_dofs
 
     body, gt = walk["body"], walk["gt"]
-    tracker, _, _, _, _, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_shoulder", 0.0)
+    tracker, _, _, _, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_shoulder", 0.0)
     X, ok = triangulated_landmarks(walk["capture"].cameras, tracker.energy.keypoints, tracker.energy.rig_points)
     arm = limb_dofs(body.dofs)["left arm"]
     rng = np.random.default_rng(0)
@@ -347,17 +349,18 @@ def test_a_limb_far_from_its_landmarks_is_fitted_from_rest_as_well(walk):
 def test_an_arm_raised_while_the_person_lowered_it_comes_down(walk):
     """The case the fit from rest was made for (actor9, frames 37-39: the tracked arm stayed raised): an estimate
     with the left arm raised over the head is proposed, kept, and the wrist comes back from 0.87 m."""
-    from markerless_mocap.core.limb_search import limb_dofs
+    from markerless_mocap.core.tracking.limb_search import limb_dofs
 
-    tracker, feats, relative, _, _, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_shoulder", 0.0)
+    tracker, relative, _, _, wrist_error = _frame_one_with_a_wrong_left_arm(walk, "l_shoulder", 0.0)
     raised = tracker.to_absolute(relative)
     raised[limb_dofs(walk["body"].dofs)["left arm"]] = [0.5, 2.2, 0.0, 0.3]  # flexion, abduction, twist, elbow
     relative = tracker.to_relative(raised)
     energy = float(tracker._energy_fn(relative[None])[0])
-    fixed, fixed_energy, _ = tracker._keypoint_proposal(feats, relative, energy, 0, tracker._limbs_off(relative))
+    recovery = tracker.limb_recovery
+    fixed, fixed_energy, _ = recovery.keypoint_proposal(relative, energy, 0, recovery.limbs_off(relative))
     error = [wrist_error(tracker.to_absolute(p)) for p in (relative, fixed)]
     print(f"left wrist {1000 * error[0]:.0f} -> {1000 * error[1]:.0f} mm, energy {energy:.3f} -> {fixed_energy:.3f}")
-    assert tracker.proposals[-1] == {"limbs": ["left arm"], "kept": True}
+    assert tracker.limb_recovery.proposals[-1] == {"limbs": ["left arm"], "kept": True}
     assert error[0] > 0.5 and error[1] < 0.06
 
 

@@ -4,8 +4,8 @@ silhouette that is no person), and tracking goes on with the other views at a bo
 import numpy as np
 import pytest
 
-from markerless_mocap.core.camera import Camera
-from markerless_mocap.core.view_presence import share_inside, views_in_play
+from markerless_mocap.core.capture.camera import Camera
+from markerless_mocap.core.evidence.view_presence import share_inside, views_in_play
 
 K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
 CAM = Camera("front", K, [], np.eye(3), [0, 0, 4.0], 640, 480)  # looks along +z at the origin from z = -4
@@ -27,7 +27,8 @@ class _Evidence:
 def test_views_in_play_rules():
     cams = [CAM, CAM, CAM]
     assert views_in_play(cams, BODY).tolist() == [True, True, True]
-    assert views_in_play(cams, BODY, [_Evidence(True), _Evidence(False), _Evidence(True)]).tolist() == [True, False, True]
+    evidence = [_Evidence(True), _Evidence(False), _Evidence(True)]
+    assert views_in_play(cams, BODY, evidence).tolist() == [True, False, True]
     person, picture = np.full(3, 1000.0), np.full(3, 640 * 480.0)
     area = np.array([900.0, 50.0, 200000.0])  # a person; almost nothing (cropped out); most of the picture (blank)
     assert views_in_play(cams, BODY, None, area, person, picture).tolist() == [True, False, False]
@@ -48,8 +49,9 @@ def test_tracking_goes_on_when_the_person_vanishes_from_one_view(tmp_path):
     from capture_variants import copy_capture, rewrite_video
     from scene_helpers import ground_truth_poses, scene_dir
     from markerless_mocap.core.capture.capture import load_capture
-    from markerless_mocap.core.motion_library import build_motion_models, scene_exclusion
-    from markerless_mocap.core.tracking import Tracker, TrackingSettings, run_tracker
+    from markerless_mocap.core.tracking.motion_library import build_motion_models, scene_exclusion
+    from markerless_mocap.core.tracking.settings import TrackingSettings
+    from markerless_mocap.core.tracking.tracker import Tracker, run_tracker
 
     body, _, truth, _ = ground_truth_poses("walk")
     folder = copy_capture(tmp_path / "walk")

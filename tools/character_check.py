@@ -1,5 +1,5 @@
 """Does a character of other proportions receive the actor's motion? Key a character with solved poses the
-way `track` keys the user's character (core.proportions.character_poses, scene_bridge.key_pose), export BVH
+way `track` keys the user's character (core.actor.proportions.character_poses, scene_bridge.key_pose), export BVH
 and FBX, import them back into an empty scene, and measure: the imported bone lengths against the
 character's, and how far the character's feet are from the floor against the actor's.
 The character: a copy of the subject with other proportions (addon/actor_bridge.py; --height, --factors), or
@@ -75,7 +75,7 @@ def check_character(bpy, package, subject_blend, poses, proportions, out_dir, ac
     bridge = __import__(f"{package}.addon.scene_bridge", fromlist=["x"])
     actor_bridge = __import__(f"{package}.addon.actor_bridge", fromlist=["x"])
     export = __import__(f"{package}.operators.export", fromlist=["x"])
-    prop = __import__(f"{package}.core.proportions", fromlist=["x"])
+    prop = __import__(f"{package}.core.actor.proportions", fromlist=["x"])
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -149,7 +149,8 @@ def check_character(bpy, package, subject_blend, poses, proportions, out_dir, ac
         "actor_lowest_skin_above_floor_m": {
             "median": float(np.median(actor_low - floor_a)), "min": float((actor_low - floor_a).min()),
             "max": float((actor_low - floor_a).max())},
-        "character_minus_ratio_x_actor_lowest_m_max": float(np.abs((char_low - floor_c) - ratio * (actor_low - floor_a)).max()),
+        "character_minus_ratio_x_actor_lowest_m_max":
+            float(np.abs((char_low - floor_c) - ratio * (actor_low - floor_a)).max()),
     }
     (out_dir / "character_check.json").write_text(json.dumps(report, indent=1))
     return report
@@ -160,7 +161,7 @@ def check_result(bpy, package, result_dir):
     BVH and FBX re-imported with the keyed character's bone offsets, its toes where it was keyed, and its
     lowest skin point against the floor it stands on in the rest pose."""
     bridge = __import__(f"{package}.addon.scene_bridge", fromlist=["x"])
-    prop = __import__(f"{package}.core.proportions", fromlist=["x"])
+    prop = __import__(f"{package}.core.actor.proportions", fromlist=["x"])
     result_dir = Path(result_dir)
     with np.load(result_dir / "poses.npz") as z:
         n = len(z["poses"])
@@ -219,8 +220,8 @@ def main(argv=None):
     if args.scene is None:
         ap.error("--scene is needed (except with --tracked)")
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
-    from markerless_mocap.core.actor_file import load_actor, proportions_for_body
-    from markerless_mocap.core.proportions import Proportions, segment_lengths
+    from markerless_mocap.core.actor.actor_file import load_actor, proportions_for_body
+    from markerless_mocap.core.actor.proportions import Proportions, segment_lengths
 
     with np.load(args.result / "poses.npz") as z:
         poses = z["poses"]

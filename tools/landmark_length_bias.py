@@ -36,10 +36,11 @@ def main(argv=None):
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
     from markerless_mocap.core.capture.calibration import read_calibration
     from markerless_mocap.core.capture.capture import load_capture
-    from markerless_mocap.core.proportions import SEGMENTS
-    from markerless_mocap.core.proportions_fit import fit_proportions
-    from markerless_mocap.core.proportions_silhouette import SILHOUETTE_SEGMENTS, refine_fit
-    from markerless_mocap.core.tracking import Tracker, TrackingSettings
+    from markerless_mocap.core.actor.proportions import SEGMENTS
+    from markerless_mocap.core.actor.landmark_fit import fit_proportions
+    from markerless_mocap.core.actor.silhouette_fit import SILHOUETTE_SEGMENTS, refine_fit
+    from markerless_mocap.core.tracking.settings import TrackingSettings
+    from markerless_mocap.core.tracking.tracker import Tracker
 
     segments = SEGMENTS if args.all_segments else SILHOUETTE_SEGMENTS
     if args.segments:

@@ -1,5 +1,5 @@
 """Measure where BlazePose puts its landmarks relative to the rig's joints: the numbers behind
-core/keypoints.py's LANDMARK_OFFSETS, and which bone should carry each landmark.
+core/evidence/keypoints.py's LANDMARK_OFFSETS, and which bone should carry each landmark.
 
 For every --step-th frame of each SCENE (a rendered capture with gt_joints.npz), the true pose is fitted to the
 true joints, the landmark model runs on crops around it, the landmarks are triangulated over the views, and
@@ -30,27 +30,28 @@ def measure(scene, step, raw):
     import bpy
 
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
-    from markerless_mocap.core.body import body_frame
+    from markerless_mocap.core.body.model import body_frame
     from markerless_mocap.core.capture.capture import load_capture
-    from markerless_mocap.core.evidence_crops import evidence_around
-    from markerless_mocap.core.features.learned import LandmarkModel
-    from markerless_mocap.core.keypoint_fit import triangulated_landmarks
-    from markerless_mocap.core.keypoints import rig_keypoints
-    from markerless_mocap.core.pose_fitting import poses_from_joints
-    from markerless_mocap.core.proportions_fit import targets_from_landmarks
-    from markerless_mocap.core.results import load_joints
+    from markerless_mocap.core.evidence.crops import evidence_around
+    from markerless_mocap.core.evidence.learned import LandmarkModel
+    from markerless_mocap.core.evidence.keypoint_fit import triangulated_landmarks
+    from markerless_mocap.core.evidence.keypoints import rig_keypoints
+    from markerless_mocap.core.body.pose_fit import poses_from_joints
+    from markerless_mocap.core.actor.landmark_fit import targets_from_landmarks
+    from markerless_mocap.core.results.result_folder import load_joints
 
     bpy.ops.wm.open_mainfile(filepath=str(scene / "subject.blend"))
     body = body_from_blender(find_armature(bpy.context.scene), None, bpy.context.scene)
     sk = body.skeleton
     rig = rig_keypoints(body)
     if raw:  # the joints themselves: the rest points without the table's offsets
-        from markerless_mocap.core.keypoints import landmark_offsets
+        from markerless_mocap.core.evidence.keypoints import landmark_offsets
 
         rig.rest_points[:, :3] -= landmark_offsets(body, rig.landmarks)
     frame = body_frame(sk, body.roles)
     axes = np.stack([frame.left, frame.forward, frame.up])  # rest armature space -> (left, forward, up)
-    trunk = np.linalg.norm(sk.rest[sk.index[body.roles["neck"][0]], :3, 3] - sk.rest[sk.index[body.roles["root"][0]], :3, 3])
+    neck, root = sk.index[body.roles["neck"][0]], sk.index[body.roles["root"][0]]
+    trunk = np.linalg.norm(sk.rest[neck, :3, 3] - sk.rest[root, :3, 3])
     carriers = {"own": rig.bones, "parent": np.array([max(sk.parents[b], 0) for b in rig.bones])}
     names, frames, positions = load_joints(scene / "gt_joints.npz")
     picks = list(range(0, len(frames), step))
@@ -119,7 +120,7 @@ def medians(landmarks, offsets):
 def _left_of_pair(landmarks):
     """The left landmark's number of each landmark's left/right pair (itself for the nose): the lower of the
     two in BlazePose's numbering, as SWAP_ORDER pairs them."""
-    from markerless_mocap.core.features.learned import SWAP_ORDER
+    from markerless_mocap.core.evidence.learned import SWAP_ORDER
 
     return np.minimum(landmarks, SWAP_ORDER[landmarks])
 

@@ -101,7 +101,8 @@ def main(argv=None):
         if args.likelihood:
             command += ["--likelihood", args.likelihood]
         started = time.monotonic()
-        log = open(tmp / "track.log", "w+")  # a file, not a pipe: 1000 progress lines would fill a pipe and stall the run
+        # a file, not a pipe: 1000 progress lines would fill a pipe and stall the run
+        log = open(tmp / "track.log", "w+")
         run = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=log)
         at_checkpoint = None
         while True:

@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera, CameraError, matrix_to_rodrigues, rodrigues_to_matrix, rotation_problem
+from ..errors import InputError
+from .camera import Camera, CameraError, matrix_to_rodrigues, rodrigues_to_matrix, rotation_problem
 
 UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 _UNIT_ALIASES = {"m": "m", "meter": "m", "meters": "m", "metre": "m", "metres": "m",
@@ -33,7 +34,7 @@ LARGEST_CAMERA_SPREAD_M = 100.0
 SMALLEST_CAMERA_SPREAD_M = 0.02
 
 
-class CalibrationError(ValueError):
+class CalibrationError(InputError):
     """A calibration file cannot be used; the message names the file, the camera and the problem."""
 
 
@@ -154,7 +155,8 @@ _NOT_FINITE_FIX = "the calibration did not converge or the file was edited: reca
 def _make_camera(where: str, name, K, dist, R, t, width, height) -> Camera:
     for what, value in (("intrinsic matrix", K), ("distortion", dist), ("rotation", R), ("translation", t)):
         if not np.all(np.isfinite(np.asarray(value, dtype=np.float64))):
-            raise CalibrationError(f"{where}: camera '{name}' has NaN or infinite values in its {what}; {_NOT_FINITE_FIX}")
+            raise CalibrationError(f"{where}: camera '{name}' has NaN or infinite values in its {what}; "
+                                   f"{_NOT_FINITE_FIX}")
     try:
         return Camera(str(name), K, dist, R, t, width, height)
     except CameraError as exc:
@@ -200,7 +202,8 @@ def _numeric(where: str, cam: str, key: str, value, shapes: tuple) -> np.ndarray
         raise CalibrationError(f"{where}: camera '{cam}' has a non-numeric or ragged '{key}': {value!r}") from None
     if arr.shape not in shapes:
         counts = [str(sh[0]) for sh in shapes if len(sh) == 1]
-        wants = [(", ".join(counts[:-1]) + " or " if len(counts) > 1 else "") + counts[-1] + " values"] if counts else []
+        wants = ([(", ".join(counts[:-1]) + " or " if len(counts) > 1 else "") + counts[-1] + " values"]
+                 if counts else [])
         wants += ["x".join(str(s) for s in sh) for sh in shapes if len(sh) > 1]
         want = " or ".join(wants)
         if arr.ndim == 1:
@@ -355,7 +358,8 @@ def _read_easymocap_files(path: Path, units, image_sizes) -> list[Camera]:
         for name in names:
             K = _storage_mat(fi, wi, name, f"K_{name}")
             if K.shape != (3, 3):
-                raise CalibrationError(f"{wi}: camera '{name}' has a {K.shape[0]}x{K.shape[1]} 'K_{name}'; expected 3x3")
+                raise CalibrationError(f"{wi}: camera '{name}' has a {K.shape[0]}x{K.shape[1]} 'K_{name}'; "
+                                       "expected 3x3")
             dist = _storage_mat(fi, wi, name, f"dist_{name}", required=False)
             dist = np.zeros(0) if dist is None else dist.reshape(-1)
             if dist.size not in (0, 4, 5, 8):
@@ -442,7 +446,7 @@ def _read_qca(path: Path, units) -> list[Camera]:
             if node is None:
                 raise CalibrationError(f"{where}: camera '{name}' has no <{tag}> element")
 
-        def num(node, attr, default=None):
+        def num(node, attr, default=None, name=name):
             value = node.get(attr)
             if value is None:
                 if default is not None:
@@ -451,7 +455,8 @@ def _read_qca(path: Path, units) -> list[Camera]:
             try:
                 return float(value)
             except ValueError:
-                raise CalibrationError(f"{where}: camera '{name}' <{node.tag} {attr}=\"{value}\"> is not a number") from None
+                raise CalibrationError(f"{where}: camera '{name}' <{node.tag} {attr}=\"{value}\"> "
+                                       "is not a number") from None
 
         left, top = num(fov, "left"), num(fov, "top")
         W, H = num(fov, "right") - left + 1, num(fov, "bottom") - top + 1

@@ -14,12 +14,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
-from ..camera import Camera
+from ..errors import InputError
+from .camera import Camera
 from .calibration import MissingImageSizeError, find_calibration_file, read_calibration, require_two_cameras
 from .frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, FrameSource, FrameSourceError, find_video
 
 
-class CaptureError(ValueError):
+class CaptureError(InputError):
     """A capture folder that does not fit together (missing footage, sizes that disagree...)."""
 
 
@@ -120,8 +121,8 @@ def _load_backgrounds(folder: Path, cameras: list) -> dict | None:
         return None
     plates = {}
     for cam in cameras:
-        path = next((bg_dir / f"{cam.name}{ext}" for ext in IMAGE_EXTENSIONS if (bg_dir / f"{cam.name}{ext}").is_file()),
-                    None)
+        path = next((bg_dir / f"{cam.name}{ext}" for ext in IMAGE_EXTENSIONS
+                     if (bg_dir / f"{cam.name}{ext}").is_file()), None)
         if path is None:
             continue
         img = cv2.imread(str(path), cv2.IMREAD_COLOR)

@@ -14,13 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
+
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg", ".wmv")
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 _GRAB_AHEAD = 16  # forward jumps up to this many frames are cheaper to grab() than to seek
 DEFAULT_FPS = 30.0
 
 
-class FrameSourceError(ValueError):
+class FrameSourceError(InputError):
     """Footage that cannot be used (unreadable, empty, inconsistent sizes, bad offsets)."""
 
 
@@ -70,8 +72,9 @@ class _ImageFolderReader:
         if image is None:
             raise FrameSourceError(f"camera '{self.name}': OpenCV cannot read the image {self.files[index]}")
         if image.shape[:2] != (self.height, self.width):
-            raise FrameSourceError(f"camera '{self.name}': {self.files[index].name} is {image.shape[1]}x{image.shape[0]}"
-                                   f" but the first image is {self.width}x{self.height}; all images must match")
+            raise FrameSourceError(f"camera '{self.name}': {self.files[index].name} is "
+                                   f"{image.shape[1]}x{image.shape[0]} but the first image is "
+                                   f"{self.width}x{self.height}; all images must match")
         return image
 
     def close(self):

@@ -16,8 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
 
-class MotionFileError(ValueError):
+
+class MotionFileError(InputError):
     """A motion file that cannot be read; the message names the file, the line and the fix."""
 
 

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+
 # target (MakeHuman "cmu_mb" rig) -> source joint, for the two CMU BVH namings.
 # 01_01.bvh uses the MotionBuilder-friendly names (same as the rig except the finger tips);
 # 131_01.bvh uses the older names. One row per target bone.
@@ -69,7 +71,7 @@ UNALIGNED_BONES = frozenset({"Hips", "LowerBack", "Spine", "Spine1", "Neck", "Ne
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
-class RetargetError(ValueError):
+class RetargetError(InputError):
     """The clip and the target armature cannot be matched; the message says what to change."""
 
 
@@ -250,20 +252,20 @@ def retarget(clip, target_rest, target_parents, target_names, name_map=None, roo
 
     W = clip.world_rotations_from_rest()             # (F, J, 3, 3)
     F = W.shape[0]
-    O = np.empty((F, B, 3, 3))
+    Ot = np.empty((F, B, 3, 3))                      # O_b(t) of the module docstring
     for b in range(B):
         if b in src_idx:
-            O[:, b] = D @ W[:, src_idx[b]] @ D.T @ (A[b] @ Rr[b])
+            Ot[:, b] = D @ W[:, src_idx[b]] @ D.T @ (A[b] @ Rr[b])
         else:
             p = target_parents[b]
-            O[:, b] = O[:, p] @ (Rr[p].T @ Rr[b])
-    basis = np.empty_like(O)
+            Ot[:, b] = Ot[:, p] @ (Rr[p].T @ Rr[b])
+    basis = np.empty_like(Ot)
     for b in range(B):
         p = target_parents[b]
         if p < 0:
-            basis[:, b] = Rr[b].T @ O[:, b]
+            basis[:, b] = Rr[b].T @ Ot[:, b]
         else:
-            basis[:, b] = Rr[b].T @ Rr[p] @ np.swapaxes(O[:, p], -1, -2) @ O[:, b]
+            basis[:, b] = Rr[b].T @ Rr[p] @ np.swapaxes(Ot[:, p], -1, -2) @ Ot[:, b]
 
     # root trajectory
     if root_scale == "legs":

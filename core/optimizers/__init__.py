@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import importlib
 
-from .base import (DEFAULT_BUDGET, EnergyFn, EnergyOutputError, FrameResult, Optimizer, OptimizerInputError,
-                   PoseSpace)
+from ..errors import InputError
+from .base import DEFAULT_BUDGET, EnergyFn, EnergyOutputError, FrameResult, Optimizer, OptimizerInputError, PoseSpace
 
 DEFAULT_OPTIMIZER = "isa"
 
@@ -23,7 +23,7 @@ _REGISTRY = {
 }
 
 
-class UnknownOptimizerError(ValueError):
+class UnknownOptimizerError(InputError):
     """The requested optimiser name is not registered or its module is missing."""
 
 

@@ -10,8 +10,7 @@ import math
 
 import numpy as np
 
-from .base import (RESAMPLERS, CountingEnergy, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
-                   gaussian_mutation, particle_sets, weighted_covariance)
+from .base import RESAMPLERS, CountingEnergy, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights, gaussian_mutation, particle_sets, weighted_covariance
 from .dynamics import checked_dynamics, predicted_displacement
 
 
@@ -92,6 +91,15 @@ class AnnealedParticleFilter(Optimizer):
 
     def _reset(self) -> None:
         self.state = None
+
+    pose_arrays = ("x0", "particles")
+
+    def _carried_arrays(self):
+        return {} if self.state is None else {"particles": self.state[0], "weights": self.state[1]}
+
+    def _restore_carried(self, arrays):
+        self.state = None if "particles" not in arrays else (np.asarray(arrays["particles"], dtype=float),
+                                                             np.asarray(arrays["weights"], dtype=float))
 
     def _initial_set(self, history):
         centre = history[-1] if history else self.x0

@@ -323,6 +323,45 @@ class Optimizer(ABC):
     def _reset(self) -> None:
         """Drop per-track state (particles, histories)."""
 
+    # ---- what it carries from frame to frame, as plain data (a checkpoint stores it; restore takes it back)
+    pose_arrays: tuple[str, ...] = ("x0",)  # the names in state_arrays() that hold poses
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The arrays this optimiser carries between frames, by name: the frame count, the start pose and
+        the subclass's own (_carried_arrays). The random generator's state is random_state()."""
+        arrays = {"frame_index": np.array(self.frame_index, dtype=np.int64)}
+        if self.x0 is not None:
+            arrays["x0"] = self.x0
+        arrays.update(self._carried_arrays())
+        return arrays
+
+    def random_state(self) -> dict:
+        """The random generator's state: numpy's bit_generator.state, plain (JSON-able) data."""
+        return self.rng.bit_generator.state
+
+    def restore(self, arrays: dict, random_state: dict | None = None) -> None:
+        """Take back what state_arrays() (and random_state()) gave, on an optimiser built with the same settings."""
+        arrays = dict(arrays)
+        self.frame_index = int(arrays.pop("frame_index", 0))
+        x0 = arrays.pop("x0", None)
+        self.x0 = None if x0 is None else np.asarray(x0, dtype=float)
+        self._restore_carried(arrays)
+        if random_state is not None:
+            self.rng.bit_generator.state = random_state
+
+    def map_poses(self, convert: Callable[[np.ndarray], np.ndarray], start: bool = True) -> None:
+        """Apply `convert` to every pose array carried between frames (the start pose x0 too unless not `start`)."""
+        arrays = self.state_arrays()
+        names = [n for n in self.pose_arrays if n in arrays and (start or n != "x0")]
+        self.restore({**arrays, **{n: convert(arrays[n]) for n in names}})
+
+    def _carried_arrays(self) -> dict[str, np.ndarray]:
+        """The subclass's arrays carried between frames (particles, weights...); none by default."""
+        return {}
+
+    def _restore_carried(self, arrays: dict) -> None:
+        """Take back _carried_arrays()' arrays (an absent name: nothing carried yet)."""
+
     def _check_history(self, history: Sequence[np.ndarray]) -> list[np.ndarray]:
         return [self.space.check_pose(h, f"history[{i}]") for i, h in enumerate(history)]
 

@@ -33,9 +33,9 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from ..camera import Camera
+from ..capture.camera import Camera
 from ..render.rim import MeshEdges, rim_vertices
-from ..rotations import axis_angle_matrix, matrix_to_rotvec, rotvec_to_matrix, skew
+from ..body.rotations import axis_angle_matrix, matrix_to_rotvec, rotvec_to_matrix, skew
 from .base import CountingEnergy, Optimizer, OptimizerInputError, PoseSpace
 
 MIN_CORRESPONDENCES = 6  # below this an iteration cannot constrain a pose: stop instead of guessing
@@ -66,7 +66,7 @@ class IcpProblem:
     silhouettes: list
     to_absolute: Callable[[np.ndarray], np.ndarray] = _identity
     prior: object | None = None
-    # Learned landmarks (core/keypoints.KeypointTargets at this problem's resolution) and the rig points
+    # Learned landmarks (core/evidence/keypoints.KeypointTargets at this problem's resolution) and the rig points
     # they stand for: residuals beside the rim correspondences, so the local fit keeps what they show
     # (a hand in front of the torso has no rim).
     keypoints: object | None = None
@@ -81,7 +81,7 @@ class IcpProblem:
         sils = []
         for cam, sil in zip(self.cameras, self.silhouettes):
             if not isinstance(cam, Camera):
-                raise IcpProblemError(f"cameras must be core.camera.Camera objects, got {type(cam).__name__}")
+                raise IcpProblemError(f"cameras must be core.capture.camera.Camera objects, got {type(cam).__name__}")
             sil = np.asarray(sil)
             if sil.shape != (cam.height, cam.width):
                 raise IcpProblemError(f"silhouette of camera {cam.name!r} has shape {sil.shape} but the camera is "
@@ -159,7 +159,7 @@ def descendant_matrix(skeleton) -> np.ndarray:
 
 
 def vertex_jacobian(body, pose_abs, rest_vertices, weights, descendants=None) -> np.ndarray:
-    """vertex_jacobian_reference, compiled (core/fast_jacobian.py) when numba is there."""
+    """vertex_jacobian_reference, compiled (core/optimizers/jacobian_fast.py) when numba is there."""
     fast = _fast_jacobian()
     if fast is None:
         return vertex_jacobian_reference(body, pose_abs, rest_vertices, weights, descendants)
@@ -169,7 +169,7 @@ def vertex_jacobian(body, pose_abs, rest_vertices, weights, descendants=None) ->
 @functools.cache
 def _fast_jacobian():
     try:
-        from .. import fast_jacobian
+        from . import jacobian_fast as fast_jacobian
     except ImportError:
         return None
     return fast_jacobian
@@ -389,7 +389,7 @@ class IcpSolver:
         """(C,K,2) landmark position each rig point is compared with (as the energy compares them: each
         view's left/right pairs as they fit the pose best, each landmark's best-fitting candidate) and its
         weight, or None without keypoints."""
-        from ..keypoints import chosen_targets
+        from ..evidence.keypoints import chosen_targets
 
         kp, rig = self.problem.keypoints, self.problem.rig_points
         if kp is None or rig is None or self.settings.keypoint_weight == 0:

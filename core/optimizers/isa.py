@@ -11,8 +11,7 @@ import math
 
 import numpy as np
 
-from .base import (CountingEnergy, FrameResult, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
-                   gaussian_mutation, particle_sets, systematic_resample, weighted_covariance)
+from .base import CountingEnergy, FrameResult, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights, gaussian_mutation, particle_sets, systematic_resample, weighted_covariance
 from .dynamics import checked_dynamics, predicted_displacement
 
 
@@ -111,12 +110,22 @@ class InteractingSimulatedAnnealing(Optimizer):
     def _reset(self) -> None:
         self.particles = None
 
+    pose_arrays = ("x0", "particles")
+
+    def _carried_arrays(self):
+        return {} if self.particles is None else {"particles": self.particles}
+
+    def _restore_carried(self, arrays):
+        particles = arrays.get("particles")
+        self.particles = None if particles is None else np.asarray(particles, dtype=float)
+
     # ------------------------------------------------------------------ one annealing run
     def polynomial_beta(self, m: int) -> float:
         return self.beta0 * (m + 1) ** self.b
 
-    def _anneal(self, energy: CountingEnergy, X: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray, dict]:
-        """M weightings with M-1 selection+mutation steps in between; returns (X, pi, info)."""
+    def _anneal(self, energy: CountingEnergy, X: np.ndarray, M: int,
+                schedule: str) -> tuple[np.ndarray, np.ndarray, dict]:
+        """M weightings with M-1 selection+mutation steps in between, beta by `schedule`; returns (X, pi, info)."""
         n, d = X.shape
         floor_cov = np.diag(self.sigma_floor ** 2)
         betas, vmins, fallbacks = [], [], 0
@@ -124,7 +133,7 @@ class InteractingSimulatedAnnealing(Optimizer):
         for m in range(M):
             V = energy(X)
             beta = self.polynomial_beta(m)
-            if self.schedule == "ess":
+            if schedule == "ess":
                 target = self.ess_start + (self.ess_end - self.ess_start) * (m / max(M - 1, 1))
                 solved = beta_for_ess(V, target)
                 if solved is None:
@@ -179,7 +188,7 @@ class InteractingSimulatedAnnealing(Optimizer):
 
     def _search(self, energy: CountingEnergy, history: list[np.ndarray]):
         X = self._initial_particles(history)
-        X, pi, info = self._anneal(energy, X, self.M)
+        X, pi, info = self._anneal(energy, X, self.M, self.schedule)
         self.particles = self._keep(X, pi, self.n)
         info["schedule"] = self.schedule
         return self._estimate(X, pi), info
@@ -246,11 +255,7 @@ class InteractingSimulatedAnnealing(Optimizer):
             raise OptimizerInputError(f"global_init schedule must be 'polynomial' or 'ess', got {schedule!r}")
         counted = CountingEnergy(energy, d, limit=n * iterations + 1)
         X = space.sample_within_limits(propose, self.rng, n)
-        tracking_schedule, self.schedule = self.schedule, schedule
-        try:
-            X, pi, info = self._anneal(counted, X, iterations)
-        finally:
-            self.schedule = tracking_schedule
+        X, pi, info = self._anneal(counted, X, iterations, schedule)
         info["schedule"] = schedule
         estimate = self._estimate(X, pi)
         searched = counted.count

@@ -48,6 +48,17 @@ class ParticleFilter(Optimizer):
     def _reset(self) -> None:
         self.hist, self.w = None, None
 
+    pose_arrays = ("x0", "history")
+
+    def _carried_arrays(self):
+        return {} if self.hist is None else {"history": self.hist, "weights": self.w}
+
+    def _restore_carried(self, arrays):
+        if "history" not in arrays:
+            self.hist, self.w = None, None
+        else:
+            self.hist, self.w = np.asarray(arrays["history"], dtype=float), np.asarray(arrays["weights"], dtype=float)
+
     def _init_particles(self, history):
         # One noisy pose per particle copied into all three history slots: zero initial velocity.
         centre = history[-1] if history else self.x0

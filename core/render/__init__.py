@@ -14,8 +14,9 @@ import warnings
 import numpy as np
 
 from .reference import (BOUNDARY, BOUNDARY_OFF, N_BINS, N_STATS, OVERLAP, SUM_DI, SUM_DT, SUM_EDGE_DT, TEMPLATE,
-                        FrameTargets, RenderInputError, ab_to_bins, boundary_mask, chamfer_34, project_views,
-                        rasterize, render_view)
+                        FrameTargets, RenderInputError, ab_to_bins, boundary_mask, chamfer_34, project_views, rasterize,
+                        render_view)
+from ..errors import InputError
 from . import reference
 
 BACKENDS = ("auto", "numpy", "fast", "gpu")
@@ -23,7 +24,7 @@ _warned = False
 _gpu_measure = None  # set by register_gpu: (body, proxy, poses, cameras, faces, face_label, targets, cull) -> stats
 
 
-class BackendUnavailableError(RuntimeError):
+class BackendUnavailableError(InputError, RuntimeError):
     """The backend asked for cannot run in this process; the message names the fix."""
 
 
@@ -56,7 +57,8 @@ def resolve_backend(backend="auto"):
         from . import fast  # noqa: F401  (imports numba)
     except ImportError as exc:
         if backend == "fast":
-            raise ImportError(f"the fast render backend needs numba ({exc}); install numba or use backend='numpy'")
+            raise ImportError(f"the fast render backend needs numba ({exc}); install numba or use "
+                              "backend='numpy'") from exc
         if not _warned:
             warnings.warn(f"numba is not available ({exc}); the likelihood uses the slow NumPy path", RuntimeWarning)
             _warned = True

@@ -39,7 +39,7 @@ def _chunks_one_at_a_time():
 # Below this many 1/SUBPIXEL units every edge-function value of a triangle (products of two coordinate
 # differences, each under 2^25) is an integer under 2^51, so float64 holds it exactly: the pixel loop then steps
 # floats, which gives the same inside tests and the same 1/z as integers converted per pixel, ~9 % sooner
-# (the HD search batch: 31.6 -> 28.7 ms).
+# (docs/defaults.md, "_FLOAT_EXACT_COORD").
 _FLOAT_EXACT_COORD = 1 << 24
 
 
@@ -256,8 +256,8 @@ def _statistics_kernel(q, iz, faces, face_label, cull, widths, heights, sil, sil
             p = task // C
             c = task % C
             _one_task(q[p, c], iz[p, c], faces, face_label, cull, widths[c], heights[c], sil[c], sil_dt[c],
-                      edge_off[c], edge_dt[c], ab_bins[c], obox[c], need_chamfer, cap_units, need_color, labels, zbuf, dt,
-                      row_lo, row_hi, stats[p, c], hist[p, c])
+                      edge_off[c], edge_dt[c], ab_bins[c], obox[c], need_chamfer, cap_units, need_color, labels, zbuf,
+                      dt, row_lo, row_hi, stats[p, c], hist[p, c])
 
 
 def statistics(uv, z, faces, face_label, targets: FrameTargets, need_chamfer=True, n_parts=0, cull=0):
@@ -358,7 +358,8 @@ def statistics_from_snapped(q, iz, faces, face_label, targets: FrameTargets, nee
     n_chunks = max(1, min(P * C, 8 * numba.get_num_threads()))
     with _chunks_one_at_a_time():
         _statistics_kernel(np.ascontiguousarray(q, dtype=np.int64), np.ascontiguousarray(iz, dtype=np.float64),
-                           np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(face_label, dtype=np.int16),
+                           np.ascontiguousarray(faces, dtype=np.int64),
+                           np.ascontiguousarray(face_label, dtype=np.int16),
                            int(cull), targets.widths, targets.heights, targets.silhouette, targets.silhouette_dt,
                            targets.edge_off, targets.edge_dt, targets.ab_bins, targets.observed_box, bool(need_chamfer),
                            np.int64(targets.chamfer_cap_units), bool(n_parts), n_chunks, stats, hist)

@@ -2,11 +2,16 @@
 
     blender SUBJECT.blend --enable-event-simulate --python drive_ui.py -- CAPTURE OUT
 
-Drives the Mocap sidebar the way a user would, through operators and timers: Import the capture, Check
-the rig, Calibrate Actor (modal, 3 frames), Track (the modal operator, a few frames, with the calibration), Esc to cancel (a simulated key press, as a user's
-would arrive), Resume for two more frames, Resume again with another Smoothing value (the finished take
-smoothed again), then Export FBX and BVH. Takes a screenshot at each step into OUT, writes OUT/ui_report.json
-and quits; the stage checks the report. Everything here runs on Blender's main thread (timers).
+Drives the Mocap sidebar the way a user would, through operators and timers: Import the capture, Check the
+rig, Calibrate Actor (modal, 3 frames), Track (the modal operator, a few frames, with the calibration), Esc
+to cancel (a simulated key press, as a user's would arrive), Resume for two more frames, Resume again with
+another Smoothing value (the finished take smoothed again), then Export FBX and BVH. Takes a screenshot at
+each step into OUT, writes OUT/ui_report.json and quits; the stage checks the report. Everything here runs
+on Blender's main thread (timers).
+
+With `--full-take` after OUT it tracks the whole take with the default settings instead (Import, Check, Track
+to the end, no calibration, no Esc) and takes one screenshot of the finished take: the README's picture
+(`bash tests/real_blender/stage.sh --readme-screenshot`).
 """
 import json
 import subprocess
@@ -19,6 +24,7 @@ import bpy
 
 ADDON = "bl_ext.mocapdev.markerless_mocap"  # the module enable_addon.py installs the checkout as
 CAPTURE, OUT = (Path(p) for p in sys.argv[sys.argv.index("--") + 1:][:2])
+FULL_TAKE = "--full-take" in sys.argv[sys.argv.index("--") + 1:]
 OUT.mkdir(parents=True, exist_ok=True)
 report = {"blender": bpy.app.version_string, "steps": [], "status_lines": [], "errors": [], "screenshots": []}
 state = {"t0": time.perf_counter(), "ticks": [], "step": 0}
@@ -88,6 +94,10 @@ def step_setup():
     m = props()
     m.capture_dir = str(CAPTURE)
     m.output_dir = str(OUT / "ui_result")
+    if FULL_TAKE:  # every frame, the defaults as a new user has them
+        log(f"sidebar open; capture folder, output folder; preset {m.preset}, {m.particles} x {m.iterations}")
+        bpy.app.timers.register(step_tab, first_interval=0.5)
+        return
     m.use_frame_range, m.frame_start, m.frame_end = True, 0, 29
     m.preset = "preview"  # the Preset menu as a user picks it: the budget fields follow it
     report["preset"] = {"name": m.preset, "budget": [m.particles, m.iterations],
@@ -140,7 +150,7 @@ def step_check():
     m = props()
     report["check"] = {"result": sorted(result), "dofs": m.subject_dofs, "preset": m.subject_preset}
     log(f"Check rig: {sorted(result)}, {m.subject_dofs} DOF, preset {m.subject_preset}")
-    bpy.app.timers.register(step_calibrate, first_interval=1.0)
+    bpy.app.timers.register(step_track_whole_take if FULL_TAKE else step_calibrate, first_interval=1.0)
 
 
 def invoke_modal(operator, name, started_key, watcher):
@@ -226,6 +236,32 @@ def step_watch():
     if time.perf_counter() - state["track_started"] > 240:
         raise TimeoutError("tracking did not reach 2 frames / did not stop within 240 s")
     return 0.2
+
+
+@guarded
+def step_track_whole_take():
+    report["track_invoke"] = invoke_modal(bpy.ops.mocap.track, "Track", "track_started", step_watch_whole_take)
+
+
+@guarded
+def step_watch_whole_take():
+    """Waits for the whole take (and its smoothing), then shoots the sidebar showing the finished take."""
+    m = props()
+    if m.status and (not report["status_lines"] or report["status_lines"][-1] != m.status):
+        report["status_lines"].append(m.status)
+    if m.is_tracking or m.preparing:
+        if time.perf_counter() - state["track_started"] > 900:
+            raise TimeoutError("the whole take did not finish within 900 s")
+        return 0.5
+    if not state.get("settled"):
+        state["settled"] = True
+        return 2.0  # the sidebar redraws with the final status first
+    report["finished"] = {"status": m.status, "frames_solved": m.frames_solved, "keyed_frames": len(keyed_frames()),
+                          "error": m.last_error, "seconds": round(time.perf_counter() - state["track_started"], 1)}
+    log(f"finished: '{m.status}', {report['finished']['keyed_frames']} frames keyed")
+    screenshot("finished_take")
+    finish(0)
+    return None
 
 
 def keyed_frames():

@@ -6,7 +6,9 @@
 #   3. start the UI under Xvfb and drive Import, Check, Calibrate Actor and Track (modal), Esc and Export;
 #      screenshots
 # Exit 0 = passed, 77 = skipped (cannot provision here; the reason is printed), anything else = failed.
-#   bash tests/real_blender/stage.sh [--provision-only | --resave-subjects]
+#   bash tests/real_blender/stage.sh [--provision-only | --resave-subjects | --readme-screenshot]
+#   --readme-screenshot: track the walk scene whole with the defaults in the UI and save the sidebar's picture
+#   as docs/mocap_sidebar_finished.png (the README's).
 #   --resave-subjects: rebuild every sample_scenes/*/subject.blend from its subject_source.json.gz, and
 #   sample_scenes/characters/NAME.blend from NAME_source.json.gz, with this Blender 4.3.2, the oldest real
 #   Blender at hand (files it saves open in 4.2-5.2).
@@ -128,7 +130,7 @@ pyver="$(run_in blender -b --factory-startup --python-expr 'import sys; print("P
          | sed -n 's/^PYVER //p')"
 [ -n "$pyver" ] || fail "Blender in the chroot does not start"
 log "building the extension zip for linux-x64 (wheels from dist/wheels-cache, else PyPI)"
-"$venv_py" -m markerless_mocap build --platforms linux-x64 --split-platforms --out "$out/zip" > "$out/build.log" 2>&1 \
+"$venv_py" -m markerless_mocap build --platforms linux-x64 --out "$out/zip" > "$out/build.log" 2>&1 \
   || fail "the extension build failed; see $out/build.log"
 zip_path="$(ls "$out"/zip/*.zip)"
 site="$out/blender_user/extensions/.local/lib/python$pyver/site-packages"
@@ -150,6 +152,35 @@ packages="$(run_in blender -b --python-expr 'import cv2, scipy, numba, numpy; pr
 echo "$packages"
 case "$packages" in *"/extensions/.local/"*) ;; *) fail "Blender does not import the bundled wheels";; esac
 
+start_xvfb() {  # a virtual screen for the UI runs; sets $display and $xvfb_pid
+  rm -f "$out/xvfb.display"
+  chroot "$root" Xvfb -displayfd 1 -screen 0 1600x1200x24 -nolisten tcp > "$out/xvfb.display" 2> "$out/xvfb.log" &
+  xvfb_pid=$!
+  trap 'kill "$xvfb_pid" 2>/dev/null || true; cleanup' EXIT
+  for _ in $(seq 50); do [ -s "$out/xvfb.display" ] && break; sleep 0.2; done
+  display="$(head -1 "$out/xvfb.display")"
+  [ -n "$display" ] || fail "Xvfb did not start; see $out/xvfb.log"
+}
+drive_ui() {  # drive_ui SECONDS OUT_IN_CHROOT [--full-take]: Blender's UI on the walk scene, driven by drive_ui.py
+  local seconds="$1"; shift
+  timeout "$seconds" chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURCES=/mnt/out/blender_user \
+    PYTHONDONTWRITEBYTECODE=1 NUMBA_CACHE_DIR=/var/cache/mocap-numba MOCAP_CACHE_DIR=/var/cache/mocap-motion \
+    blender "$src/sample_scenes/walk/subject.blend" --window-geometry 0 0 1600 1200 --enable-event-simulate \
+    --python "$src/tests/real_blender/drive_ui.py" -- "$src/sample_scenes/walk" "$@"
+}
+
+if [ "${1:-}" = "--readme-screenshot" ]; then
+  # The README's picture of the panel: the walk scene tracked whole with the defaults in the real UI.
+  start_xvfb
+  log "UI on Xvfb :$display: the whole walk take with the default settings (a few minutes)"
+  drive_ui 1200 /mnt/out/readme --full-take > "$out/readme.log" 2>&1 || fail "the full-take UI run failed; see $out/readme.log"
+  grep '^STAGE-UI' "$out/readme.log" | sed 's/^STAGE-UI/[stage-ui]/'
+  [ -s "$out/readme/finished_take.png" ] || fail "no screenshot of the finished take; see $out/readme.log"
+  cp "$out/readme/finished_take.png" "$repo/docs/mocap_sidebar_finished.png"
+  log "docs/mocap_sidebar_finished.png written"
+  exit 0
+fi
+
 # 3. every sample scene's subject opens in this Blender
 rc=0
 run_in blender -b --python-exit-code 1 --python "$src/tests/real_blender/open_subjects.py" -- "$src/sample_scenes" \
@@ -165,7 +196,7 @@ run_in blender -b "$src/sample_scenes/walk/subject.blend" --command markerless_m
   --out /mnt/out/command_result > "$out/command.log" 2>&1 || fail "the --command run exited with $?; see $out/command.log"
 log "--command run took $(( $(date +%s) - t1 )) s"
 grep -q Traceback "$out/command.log" && fail "the --command run printed a traceback; see $out/command.log"
-expected=(joints.npz poses.npz keypoints.npz report.json animation.bvh animation.fbx tracked.blend checkpoint.pkl
+expected=(joints.npz poses.npz keypoints.npz report.json animation.bvh animation.fbx tracked.blend checkpoint.npz
           overlay/cam1.mp4 overlay/cam2.mp4 overlay/cam3.mp4 overlay/cam4.mp4)
 for f in "${expected[@]}"; do
   [ -s "$out/command_result/$f" ] || fail "the --command run did not write $f; see $out/command.log"
@@ -181,20 +212,10 @@ diff <(cd "$out/command_result" && find . -type f | sort) <(cd "$out/module_resu
 log "--command run wrote every result file: ${expected[*]} (the same set as python -m markerless_mocap track)"
 
 # 5. the UI under Xvfb: Import, Check, Calibrate Actor (modal), Track (modal), Esc, Resume twice, Export, with screenshots
-rm -f "$out/xvfb.display"
-chroot "$root" Xvfb -displayfd 1 -screen 0 1600x1200x24 -nolisten tcp > "$out/xvfb.display" 2> "$out/xvfb.log" &
-xvfb_pid=$!
-trap 'kill "$xvfb_pid" 2>/dev/null || true; cleanup' EXIT
-for _ in $(seq 50); do [ -s "$out/xvfb.display" ] && break; sleep 0.2; done
-display="$(head -1 "$out/xvfb.display")"
-[ -n "$display" ] || fail "Xvfb did not start; see $out/xvfb.log"
+start_xvfb
 log "UI on Xvfb :$display: Import, Check, Calibrate, Track (modal), Esc, Resume, Resume at 3 Hz, Export"
 t1=$(date +%s)
-timeout 420 chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURCES=/mnt/out/blender_user \
-  PYTHONDONTWRITEBYTECODE=1 NUMBA_CACHE_DIR=/var/cache/mocap-numba MOCAP_CACHE_DIR=/var/cache/mocap-motion \
-  blender "$src/sample_scenes/walk/subject.blend" --window-geometry 0 0 1600 1200 --enable-event-simulate \
-  --python "$src/tests/real_blender/drive_ui.py" -- "$src/sample_scenes/walk" /mnt/out/ui > "$out/ui.log" 2>&1 \
-  || fail "the UI run exited with $?; see $out/ui.log"
+drive_ui 420 /mnt/out/ui > "$out/ui.log" 2>&1 || fail "the UI run exited with $?; see $out/ui.log"
 kill "$xvfb_pid" 2>/dev/null || true
 log "UI run took $(( $(date +%s) - t1 )) s"
 grep '^STAGE-UI' "$out/ui.log" | sed 's/^STAGE-UI/[stage-ui]/'
