@@ -28,11 +28,6 @@ os.environ.setdefault("MOCAP_CACHE_DIR", str(_tmp_root / "cache"))
 SAMPLE_SCENES = REPO_ROOT / "sample_scenes"
 
 
-def pytest_configure(config):
-    config.addinivalue_line("markers", "bpy: needs the bpy module")
-    config.addinivalue_line("markers", "slow: longer than a few seconds")
-
-
 @pytest.fixture
 def tmp_out(tmp_path):
     return tmp_path

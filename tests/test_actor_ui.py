@@ -153,6 +153,7 @@ def test_cli_reuses_a_saved_calibration_and_refuses_a_bad_one(subject_with_actor
     assert last.startswith("markerless_mocap track: ") and "not an actor calibration" in last
 
 
+@pytest.mark.slow
 def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     """`track --calibrate` end to end (a tiny search budget, 3 calibration frames, 2 tracked): OUT/actor.json is
     written (with the mask refinement's record and the body chosen), joints.npz holds the calibrated actor's

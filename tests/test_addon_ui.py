@@ -72,6 +72,7 @@ def test_disable_removes_everything_and_enable_restores_it(addon_module_name, bp
     assert _module(addon_module_name, "operators")._cli_handle is not None
 
 
+@pytest.mark.slow
 def test_blender_command_tracks_the_open_file(addon_module_name, bpy_module, tmp_path):
     """`blender --background SUBJECT.blend --command markerless_mocap track ...`: Blender opens the file,
     then calls the function the add-on registered with the arguments after the name. No --scene:
@@ -95,6 +96,7 @@ def test_blender_command_tracks_the_open_file(addon_module_name, bpy_module, tmp
 RESULT_FILES = ("joints.npz", "poses.npz", "report.json", "animation.bvh", "animation.fbx", "tracked.blend")
 
 
+@pytest.mark.slow
 def test_blender_command_with_no_active_object_writes_every_result_file(addon_module_name, bpy_module, tmp_path):
     """A real `blender -b FILE --command markerless_mocap track` has no `context.object`: Blender's BVH
     exporter polls on it and refused to run (issue 14). Same state here: nothing selected, nothing active,

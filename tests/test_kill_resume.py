@@ -36,6 +36,7 @@ def _saved_frames(out):
         return []
 
 
+@pytest.mark.slow
 def test_sigkill_then_resume_gives_the_uninterrupted_poses(tmp_path):
     env = cli_environment()
     full_out, killed_out = tmp_path / "full", tmp_path / "killed"

@@ -295,8 +295,8 @@ def test_fast_path_matches_reference_on_the_body_at_the_energy_resolution(bpy_mo
     arm, mesh = load_subject(bpy_module)
     body = body_from_blender(arm, mesh)
     proxy = make_proxy(body, 2000)
-    cams = [look_at(f"c{i}", [3.5 * np.cos(a), 3.5 * np.sin(a), 1.2], body.default_pose()[:3], 550, 640,
-                    480).scaled(0.5)
+    cams = [look_at(f"c{i}", [3.5 * np.cos(a), 3.5 * np.sin(a), 1.2], body.default_pose()[:3],
+                    550, 640, 480).scaled(0.5)
             for i, a in enumerate(np.deg2rad([20, 110, 200, 290]))]
     rng = np.random.default_rng(4)
     targets = random_blob_targets(cams, rng)

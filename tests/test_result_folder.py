@@ -40,7 +40,8 @@ def _no_partial_files(folder):
 def test_every_result_file_is_renamed_into_place(tmp_path, monkeypatch):
     renamed = []
     real_replace = os.replace
-    monkeypatch.setattr(atomic_files.os, "replace", lambda a, b: (renamed.append(os.path.basename(b)), real_replace(a, b)))
+    monkeypatch.setattr(atomic_files.os, "replace",
+                        lambda a, b: (renamed.append(os.path.basename(b)), real_replace(a, b)))
     writer = _writer(tmp_path / "out")
     writer.add(_estimate(0), tracker_state={"rng": 1})
     on_disk = sorted(p.name for p in (tmp_path / "out").iterdir())
@@ -106,6 +107,7 @@ def test_a_read_only_result_folder_is_named(tmp_path):
         out.chmod(0o700)
 
 
+@pytest.mark.slow
 def test_track_stops_in_one_line_when_the_disk_fills(tmp_path, monkeypatch, capsys):
     pytest.importorskip("bpy")
     from scene_helpers import scene_dir

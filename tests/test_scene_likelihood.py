@@ -55,6 +55,7 @@ def test_silhouettes_with_plates_match_the_true_masks():
     assert mean >= 0.85
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SCENES)
 def test_silhouettes_without_plates_match_the_true_masks(name):
     capture = load_capture(scene_dir(name))

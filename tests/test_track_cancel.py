@@ -62,6 +62,7 @@ def _keyed_frames(addon_module_name, arm):
     return [int(round(f)) for f in compat.keyed_frames(arm)]
 
 
+@pytest.mark.slow
 def test_esc_keeps_the_keys_and_writes_the_results_of_the_solved_frames(addon_module_name, bpy_module, tmp_path):
     bpy = bpy_module
     out = tmp_path / "result"

@@ -135,6 +135,7 @@ def _track_cli(out, frames, *extra):
                  "--frames", frames, "--particles", "30", "--iterations", "4", "--seed", "3", *extra])
 
 
+@pytest.mark.slow
 def test_resume_continues_exactly(tmp_path):
     assert _track_cli(tmp_path / "full", "0-4", "--no-export", "--no-overlays") == 0
     assert _track_cli(tmp_path / "split", "0-2", "--no-export", "--no-overlays") == 0

@@ -10,7 +10,8 @@ import math
 
 import numpy as np
 
-from .base import RESAMPLERS, CountingEnergy, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights, gaussian_mutation, particle_sets, weighted_covariance
+from .base import (RESAMPLERS, CountingEnergy, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
+                   gaussian_mutation, particle_sets, weighted_covariance)
 from .dynamics import checked_dynamics, predicted_displacement
 
 

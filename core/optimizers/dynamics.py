@@ -37,7 +37,8 @@ def checked_dynamics(dynamics, who: str):
     return dynamics
 
 
-def predicted_displacement(history: Sequence[np.ndarray], dynamics: ConditionalGaussianDynamics | None) -> np.ndarray | None:
+def predicted_displacement(history: Sequence[np.ndarray],
+                           dynamics: ConditionalGaussianDynamics | None) -> np.ndarray | None:
     """How far the next pose is predicted to move from the last estimate: the mean of `dynamics`
     (AR(3)) when given, else constant velocity; None before two estimates exist."""
     if len(history) < 2:

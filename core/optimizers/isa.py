@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 
-from .base import CountingEnergy, FrameResult, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights, gaussian_mutation, particle_sets, systematic_resample, weighted_covariance
+from .base import (CountingEnergy, FrameResult, Optimizer, OptimizerInputError, PoseSpace, boltzmann_weights,
+                   gaussian_mutation, particle_sets, systematic_resample, weighted_covariance)
 from .dynamics import checked_dynamics, predicted_displacement
 
 

@@ -54,9 +54,12 @@ def _jacobian_kernel(pose, world, inv_rest, rest_relative, parents, armature, ve
         parent_matrix = world[p] if p >= 0 else armature
         for i in range(4):
             for j in range(4):
-                G[i, j] = (parent_matrix[i, 0] * rest_relative[b, 0, j] + parent_matrix[i, 1] * rest_relative[b, 1, j]
-                           + parent_matrix[i, 2] * rest_relative[b, 2, j] + parent_matrix[i, 3] * rest_relative[b, 3, j])
-        det = (G[0, 0] * (G[1, 1] * G[2, 2] - G[1, 2] * G[2, 1]) - G[0, 1] * (G[1, 0] * G[2, 2] - G[1, 2] * G[2, 0])
+                G[i, j] = (parent_matrix[i, 0] * rest_relative[b, 0, j]
+                           + parent_matrix[i, 1] * rest_relative[b, 1, j]
+                           + parent_matrix[i, 2] * rest_relative[b, 2, j]
+                           + parent_matrix[i, 3] * rest_relative[b, 3, j])
+        det = (G[0, 0] * (G[1, 1] * G[2, 2] - G[1, 2] * G[2, 1])
+               - G[0, 1] * (G[1, 0] * G[2, 2] - G[1, 2] * G[2, 0])
                + G[0, 2] * (G[1, 0] * G[2, 1] - G[1, 1] * G[2, 0]))
         cube_root = math.copysign(abs(det) ** (1.0 / 3.0), det)  # drop a uniform object scale
         for i in range(3):

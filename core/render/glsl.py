@@ -321,4 +321,5 @@ void main() { gl_Position = vec4(pos, 0.0, 1.0); }
 
 __all__ = ["ATLAS_SIDE", "ATLAS_SIDE_GPU", "GlslInputError", "influence_slots", "pack_mesh", "pack_bones",
            "pack_cameras", "pack_targets", "atlas_layout", "unpack_statistics", "draw_vertex_source",
-           "DRAW_FRAGMENT_SOURCE", "ROWS_FRAGMENT_SOURCE", "TILES_FRAGMENT_SOURCE", "FULLSCREEN_VERTEX_SOURCE", "Z_NEAR"]
+           "DRAW_FRAGMENT_SOURCE", "ROWS_FRAGMENT_SOURCE", "TILES_FRAGMENT_SOURCE", "FULLSCREEN_VERTEX_SOURCE",
+           "Z_NEAR"]

@@ -51,7 +51,7 @@ def search_limbs(energy, space, x, limbs, *, seed=0, particles=LIMB_PARTICLES, i
     x = space.clamp(np.asarray(x, float)[None])[0]
     best = float(energy(x[None])[0])
     evaluations = 1
-    for k, (name, idx) in enumerate(limbs.items()):
+    for k, idx in enumerate(limbs.values()):
         def limb_energy(X_limb, x=x, idx=idx):
             X = np.repeat(x[None], len(X_limb), axis=0)
             X[:, idx] = X_limb
