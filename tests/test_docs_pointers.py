@@ -21,6 +21,8 @@ def tracked_python_files():
 def pointers():
     found = []
     for path in tracked_python_files():
+        if path.name == Path(__file__).name:  # this file's own example of a broken pointer
+            continue
         text = re.sub(r"\s*\n\s*#\s*", " ", path.read_text())  # a pointer may wrap across comment lines
         found += [(path.relative_to(REPO), doc, section) for doc, section in POINTER.findall(text)]
     return found

@@ -37,4 +37,6 @@ def test_a_failure_comes_back_as_an_error_message_after_what_was_done():
     job.join()
     assert job.seen == [0, 1, 2] and job.done
     (message, details), = job.errors
-    assert message == "RuntimeError: disk full" and "Traceback" in details
+    # not an InputError: reported as a bug of ours, with what it was, and the traceback kept
+    assert "(RuntimeError: disk full)" in message and "This is a bug in Markerless Mocap" in message
+    assert "Traceback" in details
