@@ -1,6 +1,6 @@
 """One module per user action; thin adapters between Blender properties and the engine."""
 
-_OPERATOR_MODULES = ("import_capture", "setup_subject", "calibrate", "track", "export")
+_OPERATOR_MODULES = ("import_capture", "setup_subject", "calibrate", "track", "track_batch", "export")
 CLI_NAME = "markerless_mocap"
 _cli_handle = None  # handle of `blender --command markerless_mocap`, None when not registered
 

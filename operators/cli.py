@@ -19,11 +19,17 @@ COMMANDS = {
     "compare": "run every optimiser on a capture at the same budget (the paper's Table 3)",
     "bench": "print speed figures of the likelihood engine (reference vs fast path)",
     "build": "build the installable extension zip with bundled wheels",
+    "batch": "track many takes, each cut into chunks, on local processes or a Dask cluster; stitch and write each "
+             "take's result folder",
+    "track-chunk": "track one chunk of a take into its chunk folder (the unit of work of `batch`; no Blender UI)",
+    "stitch": "stitch a take's finished chunks into its result folder",
+    "plan-chunks": "print the chunks a take's frames are cut into (JSON with --json)",
+    "seed-chunks": "follow a take's person by the landmarks alone, where its chunks after the first start",
 }
 
 
 def _command_module(name):
-    return importlib.import_module(f"{__package__}.cmd_{name}")
+    return importlib.import_module(f"{__package__}.cmd_{name.replace('-', '_')}")
 
 
 def build_parser():
@@ -37,7 +43,7 @@ def build_parser():
         try:
             module = _command_module(name)
         except ModuleNotFoundError as exc:
-            if exc.name and exc.name.endswith(f"cmd_{name}"):
+            if exc.name and exc.name.endswith(f"cmd_{name.replace('-', '_')}"):
                 p.set_defaults(_unavailable=name)
                 continue
             raise

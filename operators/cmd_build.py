@@ -1,4 +1,4 @@
-"""`build`: the installable extension zips, with the PyPI wheels of cv2/scipy/numba bundled.
+"""`build`: the installable extension zips, with the PyPI wheels of cv2/scipy/numba/dask bundled.
 
 Steps: stage the package as the manifest's [build] section selects it, collect the wheels for
 each platform (from the cache, else PyPI), then for each zip list its platform(s) and wheels in

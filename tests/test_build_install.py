@@ -1,7 +1,7 @@
 """The installable zips: build one per platform (linux-x64, windows-x64, macos-arm64) with cp311 and cp313
 wheels (from dist/wheels-cache, else PyPI once per machine), check that each manifest lists only its
 platform and its wheels, install the linux-x64 zip into a fresh bpy process, restart, and use the bundled
-cv2/scipy/numba from the extension's own site-packages. The windows-x64 and macos-arm64 zips are
+cv2/scipy/numba/dask/distributed from the extension's own site-packages. The windows-x64 and macos-arm64 zips are
 installed and enabled with Blender's platform check told their platform (tools/install_probe.py
 install-as): Blender unpacks no foreign wheel, so the add-on runs on this Python's own packages.
 
@@ -38,7 +38,36 @@ needs_bpy = pytest.mark.skipif(not HAVE_BPY, reason="bpy (and its extension buil
 RUNNING_PYTHON = tuple(sys.version_info[:2])
 PINS = wheels.read_pins(wheels.requirements_file(REPO, RUNNING_PYTHON))
 PINS_BY_PYTHON = wheels.read_pins_by_python(REPO, wheels.DEFAULT_PYTHON_VERSIONS)
-EXPECTED_DISTS = {"opencv-contrib-python-headless", "scipy", "numba", "llvmlite"}
+# dask + distributed (the batch runner) and their dependencies; importlib-metadata (with zipp and
+# lazy-importer) only where dask asks for it, before Python 3.12.
+DASK_DISTS = {"dask", "distributed", "click", "cloudpickle", "fsspec", "jinja2", "markupsafe", "locket", "msgpack",
+              "packaging", "partd", "psutil", "pyyaml", "sortedcontainers", "tblib", "toolz", "tornado", "zict"}
+DASK_DISTS_BEFORE_312 = {"importlib-metadata", "zipp", "lazy-importer"}
+# compiled: a wheel per platform and Python; abi3: one per platform for every Python; the rest pure (any)
+PER_PYTHON_DISTS = {"msgpack", "pyyaml", "markupsafe"}
+ABI3_DISTS = {"tornado", "psutil"}
+
+
+def expected_dists(python):
+    """What the zip must carry for one Blender Python (numpy is Blender's own, never bundled)."""
+    return ({"opencv-contrib-python-headless", "scipy", "numba", "llvmlite"} | DASK_DISTS
+            | (DASK_DISTS_BEFORE_312 if tuple(python) < (3, 12) else set()))
+
+
+def installed_dists(python):
+    """What Blender with this Python installs from a zip serving every Python: its own wheels, and the pure ones
+    another Python needs (a wheel has no marker Blender reads; importlib-metadata on 3.13 only sits unused)."""
+    pure_elsewhere = set().union(*(expected_dists(p) for p in wheels.DEFAULT_PYTHON_VERSIONS)) & (
+        DASK_DISTS_BEFORE_312 | DASK_DISTS) - PER_PYTHON_DISTS - ABI3_DISTS
+    return expected_dists(python) | pure_elsewhere
+
+
+def _dist(name):
+    """The distribution of a wheel file or an unpacked .dist-info folder, canonicalized."""
+    name = Path(name).name
+    if name.endswith(".whl"):
+        return wheels.parse_wheel_filename(name)[0]
+    return wheels.canonicalize_name(name.removesuffix(".dist-info").rsplit("-", 1)[0])
 
 
 def operator_classes_in_source():
@@ -102,9 +131,16 @@ def test_each_zip_lists_only_its_platform_and_exactly_the_wheels_it_carries(buil
             name, version, _, _ = wheels.parse_wheel_filename(Path(w).name)
             assert name not in dists, f"two wheels of {name} for Python {python}: {in_zip}"
             dists[name] = str(version)
-        assert set(dists) == EXPECTED_DISTS, \
-            f"Python {python}: numpy must not be bundled; cv2/scipy/numba/llvmlite must"
-        for name in ("opencv-contrib-python-headless", "scipy", "numba"):
+            tags = {(t.abi, t.platform) for t in wheels.parse_wheel_filename(Path(w).name)[3]}
+            if name in PER_PYTHON_DISTS:
+                assert all(abi == f"cp{python[0]}{python[1]}" and plat != "any" for abi, plat in tags), w
+            elif name in ABI3_DISTS:
+                assert all(abi == "abi3" and plat != "any" for abi, plat in tags), w
+            elif name in DASK_DISTS | DASK_DISTS_BEFORE_312:
+                assert tags == {("none", "any")}, w
+        assert set(dists) == installed_dists(python), \
+            f"Python {python}: numpy must not be bundled; cv2/scipy/numba/llvmlite and dask's wheels must"
+        for name in ("opencv-contrib-python-headless", "scipy", "numba", "dask", "distributed"):
             assert dists[name] == PINS_BY_PYTHON[python][name], (python, name)
         if python == RUNNING_PYTHON:  # llvmlite is numba's dependency: the version the tests here run with
             from importlib.metadata import version
@@ -216,8 +252,8 @@ def test_other_platforms_zip_installs_and_enables_where_blender_takes_it_for_its
                                                                                             tmp_path):
     """This Linux cannot load Windows or macOS wheels. Plain install: Blender refuses the zip (its manifest
     names only that platform). With Blender's platform check told that platform (install_probe install-as),
-    the zip installs and enables, every operator registers, and no wheel is unpacked: Blender picks wheels
-    by this machine's own tag, and none of the zip's fits it."""
+    the zip installs and enables, every operator registers, and only the pure-Python wheels are unpacked: Blender
+    picks wheels by this machine's own tag, which none of the zip's compiled wheels fits."""
     classes = operator_classes_in_source()
     refused = _probe(["install", build["zips"][platform], PACKAGE, *classes], tmp_path / "plain")
     assert not refused["enabled_in_preferences"] and not refused["package_dir_exists"]
@@ -228,7 +264,11 @@ def test_other_platforms_zip_installs_and_enables_where_blender_takes_it_for_its
     assert report["package_dir_exists"] and report["enabled_in_preferences"]
     assert report["addon_utils_check"] == [True, True]
     assert report["registered_classes"] == classes
-    assert report["unpacked"] == []
+    with zipfile.ZipFile(build["zips"][platform]) as zf:
+        pure = {_dist(n) for n in zf.namelist() if n.endswith("-none-any.whl")
+                and wheels.wheel_fits(Path(n).name, PLATFORM, RUNNING_PYTHON)}
+    assert "dask" in pure and not pure & (PER_PYTHON_DISTS | ABI3_DISTS)
+    assert {_dist(d) for d in report["unpacked"]} == pure, report["unpacked"]
     assert report["blender"].startswith(str(PINS["bpy"]))
 
 
@@ -250,10 +290,10 @@ def test_bundled_wheels_import_from_the_extension_site_packages(installed):
     report = installed["restart"]
     site = Path(report["extensions_dir"]) / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}"
     # the linux-x64 wheels for this Python, and nothing else (numpy is Blender's own)
-    unpacked = {wheels.canonicalize_name(d.removesuffix(".dist-info").rsplit("-", 1)[0]) for d in report["unpacked"]}
-    assert unpacked == EXPECTED_DISTS, report["unpacked"]
+    assert {_dist(d) for d in report["unpacked"]} == installed_dists(RUNNING_PYTHON), report["unpacked"]
     expected_versions = {"cv2": PINS["opencv-contrib-python-headless"], "scipy": PINS["scipy"],
-                         "numba": PINS["numba"]}
+                         "numba": PINS["numba"], "dask": PINS["dask"], "distributed": PINS["distributed"]}
+    assert set(report["modules"]) == set(expected_versions)
     for name, version in expected_versions.items():
         info = report["modules"][name]
         assert Path(info["file"]).is_relative_to(site), f"{name} came from {info['file']}, not {site}"

@@ -9,7 +9,8 @@ import pytest
 
 CORE = Path(__file__).resolve().parents[1] / "core"
 # Lowest first; the order docs/architecture.md draws.
-LAYERS = ["capture", "body", "mocap", "render", "evidence", "energy", "optimizers", "tracking", "actor", "results"]
+LAYERS = ["capture", "body", "mocap", "render", "evidence", "energy", "optimizers", "tracking", "actor", "results",
+          "batch"]
 ROOT_HELPERS = {"jit", "blas_threads", "atomic_files", "errors", "registry"}
 
 

@@ -10,13 +10,13 @@ first install that shares nothing with the caller's bpy:
 `install` installs and enables the zip and saves the preferences; `restart` is the next Blender
 start on the same user folder. Only after a restart does Blender put the extension's
 site-packages (where it unpacked the bundled wheels) ahead of the Python's own, so that is where
-cv2/scipy/numba must be imported from and exercised.
+cv2/scipy/numba/dask/distributed must be imported from and exercised.
 
 `install-as` installs a zip built for another platform (windows-x64 on this Linux): Blender's
 platform check, here and in the blender_ext.py process it runs to install, sees PLATFORM, so the
 package is installed and enabled as there. Blender picks the wheels to unpack by this machine's
-own tag (sysconfig), so none of the zip's foreign wheels is unpacked or loaded: the add-on
-enables on the Python's own cv2/scipy/numba.
+own tag (sysconfig), so none of the zip's compiled foreign wheels is unpacked or loaded (the pure-Python
+ones, dask's, are): the add-on enables on the Python's own cv2/scipy/numba.
 """
 import importlib.util
 import json
@@ -81,7 +81,8 @@ def probe(mode, package_id, expected_classes, zip_path=None, as_platform=None):
     report["unpacked"] = sorted(n for n in os.listdir(site) if n.endswith(".dist-info")) if os.path.isdir(site) else []
     report["modules"] = {}
     if mode == "restart":
-        for name, check in (("cv2", _check_cv2), ("scipy", _check_scipy), ("numba", _check_numba)):
+        for name, check in (("cv2", _check_cv2), ("scipy", _check_scipy), ("numba", _check_numba),
+                            ("dask", _check_dask), ("distributed", _check_distributed)):
             try:
                 module_obj = __import__(name)
                 report["modules"][name] = {"file": module_obj.__file__, "version": module_obj.__version__,
@@ -115,6 +116,27 @@ def _check_numba():
         return s
 
     return total(101) == 5050
+
+
+def _check_dask():
+    import dask
+    return dask.delayed(sum)([1, 2, 3]).compute(scheduler="sync") == 6
+
+
+def _check_distributed():
+    """A one-worker cluster in this process runs a task: tornado, msgpack and the scheduler all work, and
+    the compiled parts of the per-platform wheels (msgpack, pyyaml, markupsafe) loaded, not a fallback."""
+    import markupsafe
+    import msgpack
+    import yaml
+    from distributed import Client, LocalCluster
+
+    compiled = (msgpack.Packer.__module__ == "msgpack._cmsgpack" and yaml.__with_libyaml__
+                and markupsafe._escape_inner.__module__ == "markupsafe._speedups")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        ran = client.submit(sum, [1, 2, 3]).result(timeout=60) == 6
+    return bool(compiled and ran)
 
 
 if __name__ == "__main__":

@@ -29,7 +29,10 @@ except ImportError:  # packaging comes with pytest in the venv; pip always vendo
     from pip._vendor.packaging.version import Version
 
 # Packages bundled in the zip (their pins come from requirements.txt); their dependencies follow.
-BUNDLED = ("opencv-contrib-python-headless", "scipy", "numba")
+# dask and distributed run chunks of takes on local processes or a cluster (`batch`, the Track panel);
+# their compiled dependencies (msgpack, pyyaml, markupsafe) need a wheel per platform and Python,
+# tornado and psutil are abi3, the rest pure.
+BUNDLED = ("opencv-contrib-python-headless", "scipy", "numba", "dask", "distributed")
 # Blender ships these: bundling a second copy would shadow Blender's own.
 PROVIDED_BY_BLENDER = frozenset({"numpy"})
 

@@ -62,6 +62,34 @@ def matrix_to_rotvec(matrix):
     return out
 
 
+def rotvecs_to_quaternions(rotvecs):
+    """(F,3) rotation vectors -> (F,4) unit quaternions (x, y, z, w), each on the side of the previous one."""
+    angle = np.linalg.norm(rotvecs, axis=1)
+    half = 0.5 * angle
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis_scale = np.where(angle > 1e-12, np.sin(half) / angle, 0.5)
+    q = np.concatenate([rotvecs * axis_scale[:, None], np.cos(half)[:, None]], axis=1)
+    for i in range(1, len(q)):
+        if q[i] @ q[i - 1] < 0:
+            q[i] = -q[i]
+    return q
+
+
+def quaternions_to_rotvecs(q, near):
+    """(F,4) quaternions -> (F,3) rotation vectors, each the equivalent one (angle or angle - 2 pi) nearest to
+    `near` (F,3) (the solved ones, for a smoothed or blended root), so the DOF values stay continuous with them."""
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    q = np.where(q[:, 3:] < 0, -q, q)  # w >= 0: angle in [0, pi]
+    s = np.linalg.norm(q[:, :3], axis=1)
+    angle = 2 * np.arctan2(s, q[:, 3])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis = np.where(s[:, None] > 1e-12, q[:, :3] / s[:, None], 0.0)
+    principal = axis * angle[:, None]
+    other = axis * (angle - 2 * np.pi)[:, None]
+    closer = np.linalg.norm(other - near, axis=1) < np.linalg.norm(principal - near, axis=1)
+    return np.where(closer[:, None], other, principal)
+
+
 def orthonormalize(matrix):
     """Nearest rotation (SVD) of (...,3,3)."""
     u, _, vt = np.linalg.svd(matrix)

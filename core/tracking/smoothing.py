@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..body.rotations import quaternions_to_rotvecs, rotvecs_to_quaternions
 from ..errors import InputError
 
 DEFAULT_CUTOFF_HZ = 8.0
@@ -62,34 +63,6 @@ def low_pass(signal, cutoff_fraction):
     return filtfilt(b, a, signal, axis=0, padtype="odd", padlen=pad)
 
 
-def _rotvecs_to_quaternions(rotvecs):
-    """(F,3) rotation vectors -> (F,4) unit quaternions (x, y, z, w), each on the side of the previous one."""
-    angle = np.linalg.norm(rotvecs, axis=1)
-    half = 0.5 * angle
-    with np.errstate(invalid="ignore", divide="ignore"):
-        axis_scale = np.where(angle > 1e-12, np.sin(half) / angle, 0.5)
-    q = np.concatenate([rotvecs * axis_scale[:, None], np.cos(half)[:, None]], axis=1)
-    for i in range(1, len(q)):
-        if q[i] @ q[i - 1] < 0:
-            q[i] = -q[i]
-    return q
-
-
-def _quaternions_to_rotvecs(q, near):
-    """(F,4) quaternions -> (F,3) rotation vectors, each the equivalent one (angle or angle - 2 pi) nearest to
-    `near` (the unsmoothed rotation vectors), so the DOF values stay continuous with what was solved."""
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    q = np.where(q[:, 3:] < 0, -q, q)  # w >= 0: angle in [0, pi]
-    s = np.linalg.norm(q[:, :3], axis=1)
-    angle = 2 * np.arctan2(s, q[:, 3])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        axis = np.where(s[:, None] > 1e-12, q[:, :3] / s[:, None], 0.0)
-    principal = axis * angle[:, None]
-    other = axis * (angle - 2 * np.pi)[:, None]
-    closer = np.linalg.norm(other - near, axis=1) < np.linalg.norm(principal - near, axis=1)
-    return np.where(closer[:, None], other, principal)
-
-
 def smooth_poses(body, poses, frames, fps, cutoff_hz=DEFAULT_CUTOFF_HZ):
     """Solved poses (F,D) of `frames` (F,) -> the smoothed poses (F,D), each run of consecutive frames low-passed
     at `cutoff_hz`; runs shorter than MIN_RUN frames unchanged. The joint angles are clipped to their limits."""
@@ -104,7 +77,7 @@ def smooth_poses(body, poses, frames, fps, cutoff_hz=DEFAULT_CUTOFF_HZ):
         run = poses[a:b]
         out[a:b, rest] = low_pass(run[:, rest], fraction)
         if rot.size:
-            q = low_pass(_rotvecs_to_quaternions(run[:, rot]), fraction)
-            out[a:b, rot] = _quaternions_to_rotvecs(q, run[:, rot])
+            q = low_pass(rotvecs_to_quaternions(run[:, rot]), fraction)
+            out[a:b, rot] = quaternions_to_rotvecs(q, run[:, rot])
     out[:, rest] = np.clip(out[:, rest], body.lower[rest], body.upper[rest])
     return out

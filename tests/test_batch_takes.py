@@ -1,0 +1,101 @@
+"""The take list of `batch` (core/batch/takes.py, operators/cmd_batch.py): each bad input stops the batch before
+anything is tracked, with a message that names the take and the fix; a good list reads with its settings."""
+import pytest
+
+from markerless_mocap.core.batch.takes import TakeListError, read_take_list
+
+from scene_helpers import scene_dir
+
+WALK = scene_dir("walk")  # 60 frames
+
+
+def _toml(tmp_path, text):
+    path = tmp_path / "takes.toml"
+    path.write_text(text)
+    return path
+
+
+def _take(name="a", **keys):
+    keys = {"scene": str(WALK / "subject.blend"), "capture": str(WALK), **keys}
+    return f'[[take]]\nname = "{name}"\n' + "".join(f"{k} = {v if isinstance(v, int) else repr(v)}\n"
+                                                    for k, v in keys.items())
+
+
+def test_a_good_list_with_defaults_and_relative_paths(tmp_path):
+    (tmp_path / "caps").mkdir()
+    (tmp_path / "caps" / "walk").symlink_to(WALK, target_is_directory=True)
+    path = _toml(tmp_path, '[defaults]\npreset = "preview"\nseed = 3\n'
+                 + _take("one", capture="caps/walk", frames="0-29") + _take("two", capture="caps/walk",
+                                                                           frames="30-59", seed=4))
+    one, two = read_take_list(path, defaults={"particles": 20, "seed": 1})
+    assert (one.name, one.frames, two.frames) == ("one", (0, 29), (30, 59))
+    assert one.capture == tmp_path / "caps" / "walk"
+    s1, s2 = one.settings(), two.settings()
+    assert (s1.particles, s1.iterations, s1.seed, s2.seed) == (20, 4, 3, 4)  # line > [defaults] > command line
+
+
+def test_every_frame_by_default(tmp_path):
+    (take,) = read_take_list(_toml(tmp_path, _take()))
+    assert take.frames == (0, 59)
+
+
+@pytest.mark.parametrize("text,words", [
+    (_take("a", capture="/nowhere/at/all"), "take 'a': capture /nowhere/at/all: .*does not exist"),
+    (_take("a", frames="50-70"), "take 'a': frames 50-70, but capture .* has 60 frames"),
+    (_take("a", frames="9-3"), "take 'a': frames 9-3: the last frame comes before the first"),
+    (_take("a", frames="0-39") + _take("b", frames="30-59"),
+     "take 'b': frames 30-59 overlap take 'a' \\(0-39\\) of the same capture"),
+    (_take("a", colour="red"), "take 'a': unknown key colour"),
+    (_take("a", preset="fastest"), "take 'a': preset 'fastest' is not one of"),
+    (_take("a") + _take("a"), "take 'a': a second take of that name"),
+    (_take("a/b"), "take 'a/b': take name 'a/b': use letters"),
+    (_take("a", scene="/nowhere.blend"), "take 'a': scene /nowhere.blend: no such file"),
+    (_take("a", actor="/nowhere/actor.json"), "take 'a': actor: .*no actor calibration there"),
+    ('[[take]]\nname = "a"\nscene = "x.blend"\n', "take 'a': needs a capture"),
+    ("[take]\nname = 1\n", "takes must be \\[\\[take\\]\\] tables"),
+    ("[takes]\n", "unknown takes"),
+])
+def test_bad_inputs_name_the_take(tmp_path, text, words):
+    with pytest.raises(TakeListError, match=words):
+        read_take_list(_toml(tmp_path, text))
+
+
+def test_a_folder_of_captures(tmp_path):
+    (tmp_path / "walk").symlink_to(WALK, target_is_directory=True)
+    (tmp_path / "notes").mkdir()  # no calibration: not a take
+    (take,) = read_take_list(tmp_path)
+    assert (take.name, take.scene, take.frames) == ("walk", tmp_path / "walk" / "subject.blend", (0, 59))
+
+
+def test_the_batch_refuses_a_subject_without_a_rig(bpy_module, tmp_path, capsys):
+    from markerless_mocap.operators.cli import main
+
+    bpy_module.ops.mesh.primitive_cube_add()
+    empty = tmp_path / "cube.blend"
+    bpy_module.ops.wm.save_as_mainfile(filepath=str(empty))
+    path = _toml(tmp_path, _take("good", frames="10-59") + _take("cube", scene=str(empty), frames="0-9"))
+    assert main(["batch", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "take 'cube': subject" in err and "armature" in err
+    from markerless_mocap.core.batch.progress import read_progress
+
+    progress = read_progress(tmp_path / "out")
+    assert progress["state"] == "failed" and "take 'cube'" in progress["error"]
+
+
+def test_the_panel_api_starts_a_batch_in_the_background_and_reads_its_end(tmp_path, monkeypatch):
+    """launch_batch (what the Blender panel calls): a background process; its progress file says how it ended."""
+    import time
+
+    from markerless_mocap.core.batch.progress import read_progress
+    from markerless_mocap.operators.cmd_batch import launch_batch
+    from scene_helpers import cli_environment
+
+    monkeypatch.setenv("PYTHONPATH", cli_environment()["PYTHONPATH"])
+    proc = launch_batch([{"name": "lost", "scene": str(WALK / "subject.blend"), "capture": str(tmp_path / "gone")}],
+                        tmp_path / "out")
+    assert proc.wait(timeout=120) == 2
+    progress = read_progress(tmp_path / "out")
+    assert progress["state"] == "failed" and "take 'lost': capture" in progress["error"]
+    assert "take 'lost'" in (tmp_path / "out" / "batch.log").read_text()
+    assert time.time() - progress["updated"] < 120
