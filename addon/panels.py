@@ -111,6 +111,12 @@ def _draw_calibration(box, props, context):
         box.operator("mocap.apply_actor_copy", icon="DUPLICATE")
 
 
+def actor_summary_header(first_line):
+    """The folded summary's one line, short enough for the sidebar: 'height 1.550 m (rig 1.666 m), measured
+    1.550 m' -> 'Actor 1.550 m (rig 1.666 m)'; the whole line is the first one inside."""
+    return "Actor " + first_line.split(", ")[0].removeprefix("height ")
+
+
 def _draw_actor_summary(layout, props, context):
     """The fitted proportions, folded under their first line (the height): a dozen lines of lengths would push
     the Track panel out of view."""
@@ -118,10 +124,10 @@ def _draw_actor_summary(layout, props, context):
     if not lines:
         return
     header, body = layout.panel("MOCAP_actor_summary", default_closed=True)
-    header.label(text=f"Calibrated: {lines[0]}", icon="CHECKMARK")
+    header.label(text=actor_summary_header(lines[0]), icon="CHECKMARK")
     if body is None:
         return
-    for line in lines[1:]:  # the body's choice and the masks' searches run long
+    for line in lines:  # the body's choice and the masks' searches run long
         _wrapped(body, line, context)
 
 
@@ -157,6 +163,10 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         settings.prop(props, "seed")
         settings.prop(props, "refine")
         settings.prop(props, "smoothing_hz", text="Smoothing (Hz)")
+        settings.prop(props, "foot_lock")
+        threshold = settings.row()
+        threshold.enabled = props.foot_lock
+        threshold.prop(props, "foot_lock_speed")
         settings.prop(props, "backend")
         settings.prop(props, "background")
         if props.backend_used:  # what the last Track chose (auto probes the GPU), wrapped: a label does not wrap
@@ -168,21 +178,45 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         rng.prop(props, "frame_end")
         settings.prop(props, "output_dir", text="Output")
         settings.prop(props, "resume")
+        settings.prop(props, "run_on")
+        if props.run_on != "this":
+            _draw_batch_settings(settings, props)
         row = layout.row()
         row.scale_y = 1.5
         row.enabled = not props.is_tracking
         row.operator("mocap.track", icon="PLAY")
-        if props.is_tracking and props.preparing:
+        if props.batch_dir:  # a take sent to local processes or a cluster: its chunks
+            layout.progress(factor=props.progress, type="BAR",
+                            text=f"{props.chunks_done}/{props.chunks_total} chunks")
+        elif props.is_tracking and props.preparing:
             layout.progress(factor=props.progress, type="BAR", text=f"Preparing {100 * props.progress:.0f} %")
         elif props.is_tracking or props.frames_solved:
             layout.progress(factor=props.progress, type="BAR",
                             text=f"{props.frames_solved}/{props.frames_total} frames")
         if props.status:
             _wrapped(layout, props.status, context)
-        if props.is_tracking:
+        if props.batch_dir:
+            layout.operator("mocap.cancel_batch", icon="CANCEL")
+        elif props.is_tracking:
             layout.label(text="Esc to cancel (keys made so far are kept)", icon="CANCEL")
         if props.last_error:
             _wrapped(layout, props.last_error, context, icon="ERROR", alert=True)
+
+
+def _draw_batch_settings(layout, props):
+    """Run On: local processes or a scheduler; what is sent and how it is cut into chunks."""
+    col = layout.column()
+    col.prop(props, "batch_scope")
+    if props.batch_scope == "folder":
+        col.prop(props, "batch_folder")
+    if props.run_on == "local":
+        col.prop(props, "local_workers")
+    else:
+        row = col.row()
+        row.alert = not props.scheduler_address.strip()
+        row.prop(props, "scheduler_address")
+        col.prop(props, "worker_command")
+    col.prop(props, "chunk_frames")
 
 
 class MOCAP_PT_results(_MocapPanel, bpy.types.Panel):

@@ -8,6 +8,8 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
+from ..core.batch.plan import DEFAULT_CHUNK_FRAMES
+from ..core.tracking.foot_contact import CONTACT_SPEED
 from ..core.tracking.options import OPTIONS, settings_from_choices
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 
@@ -45,6 +47,20 @@ UNITS = (
 )
 
 CAMERA_COLLECTION = "Mocap Cameras"
+
+# Where Track runs: here, frame by frame, or cut into chunks by the batch runner (operators/track_batch.py)
+RUN_ON = (
+    ("this", "This Blender", "Track here, keying each frame as it is solved"),
+    ("local", "Local Processes", "Cut the take into chunks tracked by several processes on this computer at once; "
+                                "the stitched take is keyed when it is done"),
+    ("cluster", "Scheduler", "Cut the take into chunks tracked on a Dask cluster (workers on other computers read the "
+                             "capture and write the results on shared storage); keyed when it is done"),
+)
+BATCH_SCOPE = (
+    ("take", "This Take", "The capture of the Capture panel"),
+    ("folder", "Folder of Captures", "Every capture in a folder, each a take tracked with this armature; the last "
+                                     "one is keyed here, every one has its result folder"),
+)
 
 
 # Where each segment a user can measure starts and ends on the actor (the rig's joints, core/actor/proportions.py)
@@ -130,6 +146,14 @@ class MocapSettings(bpy.types.PropertyGroup):
                                 description="When the take is solved, low-pass its motion at this many Hz (less "
                                             "jitter; 0: keep every frame as solved). The solved poses stay in "
                                             "joints_raw.npz / poses_raw.npz in the output folder")
+    foot_lock: BoolProperty(name="Foot Locking", default=True,
+                            description="When the take is solved, pin its planted feet to the floor by refitting the "
+                                        "legs (no foot sliding or sinking). The take before that stays in "
+                                        "joints_unpinned.npz / poses_unpinned.npz in the output folder")
+    foot_lock_speed: FloatProperty(name="Threshold", default=CONTACT_SPEED, min=0.01, soft_max=0.5, precision=2,
+                                   unit="VELOCITY",
+                                   description="A foot near the floor and slower than this is planted (raise it if "
+                                               "planted feet still slide, lower it if moving feet stick)")
     backend: _enum("backend")
     background: _enum("background")
     use_frame_range: BoolProperty(name="Limit Frames", default=False,
@@ -141,9 +165,34 @@ class MocapSettings(bpy.types.PropertyGroup):
         description="Where joints, poses, BVH/FBX, the report and overlays are written")
     resume: BoolProperty(name="Resume", default=False,
                          description="Continue a run whose results are already in the output folder")
+    run_on: EnumProperty(name="Run On", items=RUN_ON, default="this",
+                         description="Where the take is tracked")
+    batch_scope: EnumProperty(name="Send", items=BATCH_SCOPE, default="take",
+                              description="What is sent to the processes or the cluster")
+    batch_folder: StringProperty(name="Captures", subtype="DIR_PATH",
+                                 description="Folder whose sub-folders are captures (a calibration and videos/ "
+                                             "each): one take per sub-folder, named after it")
+    local_workers: IntProperty(name="Processes", default=0, min=0, soft_max=16,
+                               description="Chunks tracked at once, one process each (0: one per two cores, as one "
+                                           "tracker keeps two cores busy)")
+    scheduler_address: StringProperty(name="Address",
+                                      description="The Dask scheduler, e.g. tcp://render01:8786; its workers need "
+                                                  "the capture, this .blend and the output folder on shared storage "
+                                                  "at the same paths")
+    worker_command: StringProperty(name="Worker Command",
+                                   description="What runs the add-on's command line on the cluster's workers, e.g. "
+                                               "\"/opt/blender/blender --background --command markerless_mocap\" "
+                                               "(empty: this Blender's path, the same on every worker)")
+    chunk_frames: IntProperty(name="Chunk Frames", default=DEFAULT_CHUNK_FRAMES, min=1, soft_max=5000,
+                              description="Frames each chunk keeps: a chunk is one worker's task")
 
     # ---- run state (written by the Track operator)
     is_tracking: BoolProperty(name="Tracking", default=False)
+    # ... and by a take sent to local processes or a cluster (operators/track_batch.py), while it runs
+    batch_dir: StringProperty(name="Batch Folder", subtype="DIR_PATH",
+                              description="Folder of the running batch (its progress, log and results)")
+    chunks_done: IntProperty(name="Chunks Done", default=0)
+    chunks_total: IntProperty(name="Chunks", default=0)
     # ... and by Calibrate Actor
     is_calibrating: BoolProperty(name="Calibrating", default=False)
     calibration_progress: FloatProperty(name="Calibration Progress", default=0.0, min=0.0, max=1.0,
@@ -193,6 +242,10 @@ def reset_run_state(_file=None):
             props.is_tracking = False
             props.preparing = False
             props.status = "The previous run did not finish; its solved frames are in the output folder"
+            if props.batch_dir:  # the batch process goes on by itself; its chunks are kept and a rerun resumes
+                props.status = (f"The take was sent to be tracked in chunks; its progress and results are in "
+                                f"{props.batch_dir} (Track again to resume it and key the result)")
+                props.batch_dir = ""
 
 
 def register():

@@ -1,8 +1,10 @@
 """`track`: track a capture with the rigged subject of a .blend and write the result folder."""
+import argparse
 import sys
 import time
 from pathlib import Path
 
+from ..core.tracking.foot_contact import CONTACT_SPEED
 from ..core.tracking.options import OPTIONS, settings_from_choices
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 
@@ -69,7 +71,16 @@ def add_arguments(p):
     p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
                    help=f"low-pass the finished take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: keep the poses as "
                         "solved); the solved poses stay in joints_raw.npz / poses_raw.npz")
+    add_foot_lock_options(p)
     add_tracking_options(p)
+
+
+def add_foot_lock_options(p):
+    p.add_argument("--foot-lock", action=argparse.BooleanOptionalAction, default=True,
+                   help="pin the finished take's planted feet to the floor by refitting the legs (default: on); the "
+                        "take before that stays in joints_unpinned.npz / poses_unpinned.npz")
+    p.add_argument("--foot-lock-speed", type=float, default=CONTACT_SPEED, metavar="M_S",
+                   help=f"a foot near the floor and slower than this (m/s) is planted (default {CONTACT_SPEED:g})")
 
 
 class Progress:
@@ -181,7 +192,7 @@ def run(args):
         session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args, choice.used),
                                frames=parse_frames(args.frames), resume=args.resume,
                                log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), actor=actor,
-                               smooth_hz=args.smooth)
+                               smooth_hz=args.smooth, foot_lock=args.foot_lock, foot_lock_speed=args.foot_lock_speed)
     except USER_ERRORS as exc:  # the capture, the rig, the settings, the folders: the message names the fix
         return cli_failure("track", exc)
     # printed once the inputs are checked: a bad input's message stays the only line
@@ -205,9 +216,16 @@ def run(args):
     if choice.used == "gpu":  # its private render scene must not be saved in tracked.blend
         from ..addon import gpu_likelihood
         gpu_likelihood.release()
+    finish_and_list(session, args, f"tracked {session.n_done} frames")
+    return 0
+
+
+def finish_and_list(session, args, done):
+    """Write the result folder's Blender-side files as --no-export / --no-overlays say and list them on stderr
+    under `done` (what was made); `track` and `stitch` end this way."""
     written = session.finish(export=not args.no_export, overlays=not args.no_overlays,
                              save_blend=not args.no_export)
-    print(f"tracked {session.n_done} frames -> {args.out}", file=sys.stderr)
+    print(f"{done} -> {args.out}", file=sys.stderr)
     for k, v in written.items():
         print(f"  {k}: {v}", file=sys.stderr)
-    return 0
+    return written

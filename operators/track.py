@@ -91,7 +91,7 @@ def build_session(context, log=None, step=None):
     session = _session_class()(context.scene, armature, capture_dir, output_folder(context), settings,
                                frames=props.frame_range(), resume=props.resume, log=log, step=step,
                                units=None if props.units == "auto" else props.units, smooth_hz=props.smoothing_hz,
-                               **extra)
+                               foot_lock=props.foot_lock, foot_lock_speed=props.foot_lock_speed, **extra)
     writer = getattr(session, "writer", None)
     if writer is not None:
         writer.info["backend"] = choice.to_dict()  # report.json
@@ -335,6 +335,10 @@ class MOCAP_OT_track(bpy.types.Operator):
 
     # ---- synchronous: background mode, scripts, tests
     def execute(self, context):
+        if context.scene.mocap.run_on != "this":  # chunks on local processes or a cluster: track_batch.py
+            from .track_batch import start
+
+            return start(self, context)
         job, session = self._begin(context)
         if job is None:
             return {"CANCELLED"}
@@ -361,7 +365,7 @@ class MOCAP_OT_track(bpy.types.Operator):
 
     # ---- modal: the UI stays responsive while the worker solves
     def invoke(self, context, _event):
-        if context.window is None:
+        if context.window is None or context.scene.mocap.run_on != "this":
             return self.execute(context)
         job, session = self._begin(context)
         if job is None:

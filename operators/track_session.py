@@ -15,6 +15,7 @@ from ..core.capture.capture import load_capture
 from ..core.evidence.learned import require_model
 from ..core.energy.likelihood import resolve_weights
 from ..core.results.result_folder import ResultWriter, atomic_path
+from ..core.tracking.foot_contact import CONTACT_SPEED, FootContactError, check_speed
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ, MIN_RUN, check_cutoff, smooth_poses
 from ..core.tracking.settings import TrackingSettings
 from ..core.tracking.tracker import Tracker
@@ -37,7 +38,7 @@ def _blender_version():
 class TrackSession:
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
                  mesh_obj=None, frame_offset=None, prior=None, log=None, units=None, step=None, actor=None,
-                 smooth_hz=DEFAULT_CUTOFF_HZ):
+                 smooth_hz=DEFAULT_CUTOFF_HZ, foot_lock=True, foot_lock_speed=CONTACT_SPEED):
         self.scene = scene
         self.armature = armature_obj
         self.settings = settings or TrackingSettings()
@@ -77,6 +78,13 @@ class TrackSession:
             except Exception:
                 self.capture.close()
                 raise
+        # ... then its planted feet are pinned (core/tracking/foot_lock.py) at this contact speed, m/s.
+        self.foot_lock = bool(foot_lock)
+        try:
+            self.foot_lock_speed = check_speed(foot_lock_speed) if self.foot_lock else float(foot_lock_speed)
+        except Exception:
+            self.capture.close()
+            raise
         self.frame_offset = scene.frame_start if frame_offset is None else frame_offset
         self.rough_pose = self.body.default_pose()  # the subject as the user placed it
         self.capture_dir = capture_dir
@@ -176,6 +184,8 @@ class TrackSession:
             self.writer.info["first_frame_keypoint_fit"] = self.tracker.keypoint_fit
         if self.tracker.recoveries:
             self.writer.info["limb_recoveries"] = self.tracker.recoveries
+        if self.tracker.gated:  # solutions whose root moved faster than a person can, searched again
+            self.writer.info["root_gate"] = self.tracker.gated
         if self.tracker.views_left_out:  # the person outside a view's picture, or no person found there
             self.writer.info["views_left_out"] = {str(f): names for f, names in self.tracker.views_left_out.items()}
         self.writer.add(est, self.tracker.state())
@@ -204,25 +214,48 @@ class TrackSession:
         scene_bridge.key_pose(self.armature, self.character, self.character_pose(pose, first), self.scene_frame(frame))
 
     def smooth(self):
-        """Low-pass the solved take (core/tracking/smoothing.py): joints.npz and poses.npz become the smoothed take (the
-        solved ones stay as *_raw.npz) and the character is keyed with it. Main thread (keys). Returns the
-        smoothed poses, or None when smoothing is off or too few frames are solved. A finished take resumed with
-        another cut-off (`track --resume --smooth HZ`: nothing left to solve) is smoothed again from the solved
-        poses; with 0, its files go back to the solved poses."""
+        """Finish the solved take: low-pass it (core/tracking/smoothing.py; the solved poses stay as *_raw.npz),
+        then pin its planted feet (core/tracking/foot_lock.py; the take before that stays as *_unpinned.npz);
+        joints.npz and poses.npz become the result and the character is keyed with it. Main thread (keys).
+        Returns the finished poses, or None when both are off or too few frames are solved. A finished take
+        resumed with other options (`track --resume --smooth HZ --no-foot-lock`: nothing left to solve) is
+        finished again from the solved poses; with both off, its files go back to the solved poses."""
         est = self.writer.estimates
-        if not self.smooth_hz or len(est) < MIN_RUN:
-            if self.writer.holds_smoothed_take:  # a finished run smoothed: the solved take again
+        frames = np.array([e.frame for e in est])
+        poses = np.array([e.pose for e in est])
+        smoothing = None
+        if self.smooth_hz and len(est) >= MIN_RUN:
+            poses = smooth_poses(self.body, poses, frames, self.capture.frames.fps, self.smooth_hz)
+            smoothing = {"cutoff_hz": self.smooth_hz,
+                         "filter": "Butterworth low-pass, 2nd order, forwards and backwards"}
+        pinned, locking = self._lock_feet(poses, frames)
+        if smoothing is None and locking is None:
+            if self.writer.holds_finished_take:  # a finished run smoothed or pinned: the solved take again
                 self.writer.write()
             return None
-        frames = np.array([e.frame for e in est])
-        poses = smooth_poses(self.body, np.array([e.pose for e in est]), frames, self.capture.frames.fps,
-                             self.smooth_hz)
-        self.writer.write_smoothed(poses, self.body.joint_positions(poses), {
-            "cutoff_hz": self.smooth_hz, "filter": "Butterworth low-pass, 2nd order, forwards and backwards"})
+        joints = self.body.joint_positions(poses)
+        if locking is not None:
+            poses, joints, unpinned = pinned, self.body.joint_positions(pinned), (poses, joints)
+        else:
+            unpinned = None
+        self.writer.write_finished(poses, joints, smoothing, unpinned, locking)
         for frame, pose in zip(frames, poses):
             self._key_pose(frame, pose, first=poses[0])
         self.smoothed_poses = poses
         return poses
+
+    def _lock_feet(self, poses, frames):
+        """(pinned poses, report) of foot locking, or (None, None) when it is off, the take too short or the rig
+        has no legs to lock (said in the log)."""
+        if not self.foot_lock or len(poses) < MIN_RUN:
+            return None, None
+        from ..core.tracking.foot_lock import lock_feet
+
+        try:
+            return lock_feet(self.body, poses, frames, self.capture.frames.fps, speed=self.foot_lock_speed)
+        except FootContactError as exc:
+            self.log(f"warning: feet not locked: {exc}")
+            return None, None
 
     def key_all(self):
         for est in self.writer.estimates:
@@ -238,7 +271,8 @@ class TrackSession:
         if not est:
             return written
         if self.smooth() is not None:
-            written.update({name.removesuffix(".npz"): out / name for name in self.writer.RAW_FILES})
+            written.update({name.removesuffix(".npz"): out / name for name in
+                            self.writer.RAW_FILES + self.writer.UNPINNED_FILES if (out / name).exists()})
         frames = (self.scene_frame(est[0].frame), self.scene_frame(est[-1].frame))
         self.scene.frame_start, self.scene.frame_end = frames
         if export:

@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 from collections import namedtuple
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from rig_helpers import build_armature
 pytestmark = pytest.mark.bpy
 
 PANELS = ("MOCAP_PT_capture", "MOCAP_PT_subject", "MOCAP_PT_track", "MOCAP_PT_results")
-OPERATOR_MODULES = ("import_capture", "setup_subject", "calibrate", "track", "export")
+OPERATOR_MODULES = ("import_capture", "setup_subject", "calibrate", "track", "track_batch", "export")
 
 
 def _module(addon_module_name, name):
@@ -269,11 +270,11 @@ def test_calibrated_proportions_fold_under_one_summary_line(addon_module_name, b
     log = _draw_all(bpy, folded=True, panels=("MOCAP_PT_subject",))
     folded = _labels(log)
     assert ("panel", "MOCAP_actor_summary", True) in log
-    assert "Calibrated: height 1.742 m (rig 1.800 m)" in folded
-    assert not any(line in folded for line in lines[1:])
+    assert "Actor 1.742 m (rig 1.800 m)" in folded  # short enough for the sidebar's width
+    assert not any(line in folded for line in lines)
     assert len(folded) == len(before) + 1  # one line for the whole calibration while folded
     opened = _labels(_draw_all(bpy, panels=("MOCAP_PT_subject",)))
-    assert all(line in opened for line in lines[1:])
+    assert all(line in opened for line in lines)
 
 
 # ----------------------------------------------------------------------------- check rig
@@ -334,7 +335,7 @@ class FakeSession:
     block_at = None  # index of the frame whose solve waits for `release`
 
     def __init__(self, scene, armature_obj, capture_dir, out_dir, settings=None, frames=None, resume=False,
-                 log=None, units=None, step=None, smooth_hz=None):
+                 log=None, units=None, step=None, smooth_hz=None, foot_lock=None, foot_lock_speed=None):
         FakeSession.last = self
         self.step = step or (lambda text, fraction: None)
         self.args = dict(capture_dir=capture_dir, out_dir=out_dir, settings=settings, frames=frames, resume=resume,
@@ -702,3 +703,213 @@ def test_a_blend_saved_mid_run_opens_ready_to_track(addon_module_name, bpy_modul
     m = bpy.context.scene.mocap
     assert not m.is_tracking and "did not finish" in m.status
     assert bpy.ops.mocap.track.poll()
+
+
+# ----------------------------------------------------------------------------- Run On: chunks elsewhere
+def test_run_on_shows_its_settings_and_a_running_batch_its_chunks(addon_module_name, bpy_module):
+    bpy = bpy_module
+    m = bpy.context.scene.mocap
+    assert m.run_on == "this"
+    assert not {"local_workers", "scheduler_address", "chunk_frames"} & {e[1] for e in _draw_all(bpy) if e[0] == "prop"}
+    m.run_on = "local"
+    props = {e[1] for e in _draw_all(bpy) if e[0] == "prop"}
+    assert {"run_on", "batch_scope", "local_workers", "chunk_frames"} <= props and "scheduler_address" not in props
+    m.run_on, m.batch_scope = "cluster", "folder"
+    props = {e[1] for e in _draw_all(bpy) if e[0] == "prop"}
+    assert {"scheduler_address", "worker_command", "batch_folder", "chunk_frames"} <= props
+    assert "local_workers" not in props
+    # a batch running: its chunks in the bar, a Cancel button (no modal operator to take Esc)
+    m.is_tracking, m.batch_dir, m.chunks_done, m.chunks_total, m.progress = True, "/tmp/b", 3, 8, 3 / 8
+    log = _draw_all(bpy)
+    assert ("progress", pytest.approx(3 / 8), "3/8 chunks") in log
+    assert ("operator", "mocap.cancel_batch") in log
+    assert not any("Esc to cancel" in t for t in _labels(log))
+
+
+def test_batch_setup_errors_name_the_fix(addon_module_name, bpy_module, tmp_path):
+    bpy = bpy_module
+    build_armature(bpy, "cmu_mb_rest.json", name="Performer")
+    m = bpy.context.scene.mocap
+    m.output_dir, m.capture_dir = str(tmp_path / "out"), str(tmp_path / "capture")
+    m.run_on = "cluster"
+    with pytest.raises(RuntimeError, match="No scheduler address"):
+        bpy.ops.mocap.track()
+    assert not m.is_tracking and not m.batch_dir and "tcp://" in m.last_error
+    m.run_on, m.batch_scope, m.batch_folder = "local", "folder", str(tmp_path / "captures")
+    (tmp_path / "captures" / "not_a_capture").mkdir(parents=True)
+    with pytest.raises(RuntimeError, match="no capture in .*captures"):
+        bpy.ops.mocap.track()
+    assert not m.is_tracking
+    track_batch = _module(addon_module_name, "operators.track_batch")
+    assert [track_batch.take_name(n) for n in ("walk 01", "/x/day2.take-07/", "__", "_a")] == [
+        "walk_01", "day2.take-07", "take", "a"]
+
+
+def test_a_folder_sent_to_a_cluster_sends_each_capture_with_the_panels_settings(addon_module_name, bpy_module,
+                                                                               tmp_path, monkeypatch):
+    """What the Track button hands the batch runner for Run On = Scheduler and a folder of captures, and a batch
+    that could not start (exit 2 before any progress) reported with its log's words."""
+    bpy = bpy_module
+    build_armature(bpy, "cmu_mb_rest.json", name="Performer")
+    captures = tmp_path / "day 2"
+    for name in ("take 01", "take-02", "_chunks", "notes"):
+        (captures / name).mkdir(parents=True)
+    for name in ("take 01", "take-02"):
+        (captures / name / "calibration.toml").write_text("")
+    m = bpy.context.scene.mocap
+    m.output_dir = str(tmp_path / "out")
+    m.run_on, m.scheduler_address, m.worker_command = "cluster", " tcp://10.0.0.5:8786 ", "/opt/b/blender -b"
+    m.batch_scope, m.batch_folder, m.chunk_frames = "folder", str(captures), 450
+    m.preset, m.seed, m.refine, m.smoothing_hz = "preview", 3, False, 6.5
+    cmd_batch = _module(addon_module_name, "operators.cmd_batch")
+    track_batch = _module(addon_module_name, "operators.track_batch")
+    sent = {}
+
+    def fake_launch(takes, out_dir, **kwargs):
+        sent.update(kwargs, takes=takes, out_dir=out_dir)
+        (out_dir / "batch.log").write_text("markerless_mocap batch: take 'take_01': the capture has no videos/\n")
+        return _EndedProcess(2)
+
+    monkeypatch.setattr(cmd_batch, "launch_batch", fake_launch)
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    out = tmp_path / "out"
+    assert sent["out_dir"] == out and sent["scheduler"] == "tcp://10.0.0.5:8786" and sent["workers"] is None
+    assert sent["chunk_frames"] == 450
+    assert [t["name"] for t in sent["takes"]] == ["take_01", "take-02"]
+    assert [t["capture"] for t in sent["takes"]] == [str(captures / "take 01"), str(captures / "take-02")]
+    assert {t["armature"] for t in sent["takes"]} == {"Performer"} and "frames" not in sent["takes"][0]
+    subject = Path(sent["takes"][0]["scene"])
+    assert subject.is_file() and subject.parent == out  # the scene as it is now, where the workers read it
+    choices = sent["settings"]
+    assert (choices["preset"], choices["particles"], choices["iterations"], choices["seed"], choices["refine"]) == (
+        "preview", 50, 4, 3, "none")
+    assert sent["extra_args"] == ["--smooth", "6.5", "--worker-command", "/opt/b/blender -b"]
+    assert sent["command"][-2:] == ["-m", "markerless_mocap"]  # bpy is a module here: this Python runs it
+    assert m.is_tracking and m.batch_dir == str(out)
+    while bpy.context.scene.name in track_batch._RUNS:
+        track_batch.poll(bpy.context.scene.name)
+    assert m.last_error.startswith("The batch did not run: markerless_mocap batch: take 'take_01': the capture")
+    assert not m.is_tracking and not m.batch_dir
+
+
+class _EndedProcess:
+    def __init__(self, code):
+        self.returncode, self.polls = None, 0
+        self._code = code
+
+    def poll(self):  # running on the first poll, ended on the second
+        self.polls += 1
+        if self.polls > 1:
+            self.returncode = self._code
+        return self.returncode
+
+
+def _write_progress(folder, state, takes, chunks=(2, 2)):
+    import json
+
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "batch-progress.json").write_text(json.dumps({
+        "state": state, "started": 0, "updated": 0, "error": None,
+        "total": {"chunks_done": chunks[0], "chunks_total": chunks[1], "frames_done": 5, "frames_total": 5,
+                  "seconds_left": 12.0},
+        "takes": takes}))
+
+
+def test_a_finished_batch_is_keyed_from_its_stitched_poses(addon_module_name, bpy_module, tmp_path):
+    """The timer's side without processes: progress shown while the batch runs, then the result folder's poses.npz
+    keyed on the armature (capture frame + the scene's start, as Track keys), and a result of another rig refused
+    with its reason."""
+    from rig_helpers import load_subject
+
+    bpy = bpy_module
+    arm, _mesh = load_subject(bpy)
+    scene = bpy.context.scene
+    scene.frame_start = 1
+    track_batch = _module(addon_module_name, "operators.track_batch")
+    compat = _module(addon_module_name, "addon.anim_compat")
+    body = _module(addon_module_name, "addon.scene_bridge").body_from_blender(arm, None, scene)
+    rng = np.random.default_rng(0)
+    poses = np.repeat(body.default_pose()[None], 5, axis=0)
+    poses[:, body.translation_dofs] += rng.normal(0, 0.05, (5, len(body.translation_dofs)))
+    out = tmp_path / "batch"
+    result = out / "walk"
+    result.mkdir(parents=True)
+    np.savez(result / "poses.npz", dof_names=np.array(body.dof_names), frames=np.arange(3, 8), poses=poses)
+
+    def send(take_state, process, error=None):
+        run = track_batch.BatchRun(scene.name, arm.name, out, process, ["walk"], frame_offset=1)
+        track_batch._RUNS[scene.name] = run
+        scene.mocap.batch_dir, scene.mocap.is_tracking = str(out), True
+        _write_progress(out, "running", [{"name": "walk", "state": "running", "chunks_done": 1, "chunks_total": 2,
+                                          "frames": [3, 7], "result": None, "error": None}], chunks=(1, 2))
+        assert track_batch.poll(scene.name) == track_batch.POLL_SECONDS
+        m = scene.mocap
+        assert (m.chunks_done, m.chunks_total, m.progress) == (1, 2, pytest.approx(0.5))
+        assert m.status == "Running: chunk 1 of 2, about 12 s left" and m.is_tracking
+        _write_progress(out, "done", [{"name": "walk", "state": take_state, "chunks_done": 2, "chunks_total": 2,
+                                       "frames": [3, 7], "result": str(result), "error": error}])
+        assert track_batch.poll(scene.name) is None  # ended: the timer stops
+        assert scene.name not in track_batch._RUNS and not m.is_tracking and not m.batch_dir
+        return m
+
+    m = send("done", _EndedProcess(0))
+    assert m.last_error == "" and m.last_output == str(result)
+    assert m.status.startswith("Tracked 5 frames in 2 chunks") and str(result) in m.status
+    assert compat.keyed_frame_range(arm) == (4, 8) and (scene.frame_start, scene.frame_end) == (4, 8)
+    root = arm.pose.bones[body.skeleton.bone_names[body.root_bone]]
+    expected = body.local_bases(poses)[:, body.root_bone, :3, 3]
+    for i, frame in enumerate(range(4, 9)):
+        scene.frame_set(frame)
+        assert np.allclose(np.array(root.location), expected[i], atol=1e-5), frame
+
+    np.savez(result / "poses.npz", dof_names=np.array(body.dof_names[:-1]), frames=np.arange(3, 8),
+             poses=poses[:, :-1])
+    m = send("done", _EndedProcess(0))
+    assert "tracked with another rig" in m.last_error and "not keyed" in m.status
+    m = send("failed", _EndedProcess(1), error="take 'walk': chunk 000000-000004: the capture has no frame 4")
+    assert m.last_error == "take 'walk': chunk 000000-000004: the capture has no frame 4"
+    assert "none keyed" in m.status and not m.is_tracking
+
+
+@pytest.mark.slow
+def test_track_on_local_processes_keys_the_stitched_take(addon_module_name, bpy_module, tmp_path):
+    """The Track button with Run On = Local Processes: the take goes to `batch` in a process of its own (one chunk
+    worker), the panel shows the chunks as they finish without waiting on them, and the stitched take is keyed on
+    the armature when it is done."""
+    from conftest import SAMPLE_SCENES
+
+    bpy = bpy_module
+    walk = SAMPLE_SCENES / "walk"
+    bpy.ops.wm.open_mainfile(filepath=str(walk / "subject.blend"))
+    scene = bpy.context.scene
+    m = scene.mocap
+    m.capture_dir, m.output_dir = str(walk), str(tmp_path / "out")
+    m.use_frame_range, m.frame_start, m.frame_end = True, 0, 11
+    m.particles, m.iterations, m.refine = 20, 3, False
+    m.run_on, m.local_workers, m.chunk_frames = "local", 1, 10  # 2 chunks: keeps 0-5 and 6-11
+    track_batch = _module(addon_module_name, "operators.track_batch")
+    compat = _module(addon_module_name, "addon.anim_compat")
+    arm = next(o for o in scene.objects if o.type == "ARMATURE")
+
+    started = time.monotonic()
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert time.monotonic() - started < 10  # it only starts the process
+    assert m.is_tracking and m.batch_dir == str(tmp_path / "out") and "planning" in m.status
+    assert not bpy.ops.mocap.track.poll()  # one run at a time
+    seen = set()
+    deadline = time.monotonic() + 900
+    while scene.name in track_batch._RUNS:  # what the bpy.app.timers callback does (no event loop here)
+        assert time.monotonic() < deadline, f"the batch did not end: {m.status}"
+        track_batch.poll(scene.name)
+        seen.add((m.chunks_done, m.chunks_total))
+        time.sleep(0.5)
+    log = (tmp_path / "out" / "batch.log").read_text()
+    assert m.last_error == "", f"{m.last_error}\n{log[-3000:]}"
+    assert (0, 2) in seen or (1, 2) in seen, seen  # the bar moved with the chunks
+    result = tmp_path / "out" / "walk"
+    assert m.last_output == str(result) and (m.chunks_done, m.chunks_total) == (2, 2)
+    data = np.load(result / "poses.npz")
+    assert list(data["frames"]) == list(range(12))
+    assert {"joints.npz", "report.json", "animation.bvh", "tracked.blend"} <= {p.name for p in result.iterdir()}
+    assert compat.keyed_frame_range(arm) == (scene.frame_start, scene.frame_start + 11)
+    assert not m.is_tracking and bpy.ops.mocap.track.poll()

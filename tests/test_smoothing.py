@@ -120,7 +120,7 @@ def test_a_tracked_take_is_smoothed_keyed_and_the_solved_poses_are_kept(tmp_path
     out = tmp_path / "out"
     code = main(["track", "--scene", str(scene_dir("walk") / "subject.blend"), "--capture", str(scene_dir("walk")),
                  "--out", str(out), "--frames", "0-9", "--particles", "10", "--iterations", "2",
-                 "--likelihood", "silh+edge", "--no-overlays", "--smooth", "6"])
+                 "--likelihood", "silh+edge", "--no-overlays", "--smooth", "6", "--no-foot-lock"])
     assert code == 0
     joints, raw = np.load(out / "joints.npz"), np.load(out / "joints_raw.npz")
     poses, poses_raw = np.load(out / "poses.npz"), np.load(out / "poses_raw.npz")
@@ -144,7 +144,7 @@ def test_a_tracked_take_is_smoothed_keyed_and_the_solved_poses_are_kept(tmp_path
     # Another cut-off without tracking again: resume the finished take; 0 gives back the solved poses.
     args = ["track", "--scene", str(scene_dir("walk") / "subject.blend"), "--capture", str(scene_dir("walk")),
             "--out", str(out), "--frames", "0-9", "--particles", "10", "--iterations", "2", "--likelihood",
-            "silh+edge", "--no-overlays", "--resume"]
+            "silh+edge", "--no-overlays", "--resume", "--no-foot-lock"]
     assert main(args + ["--smooth", "3"]) == 0
     np.testing.assert_allclose(np.load(out / "poses.npz")["poses"],
                                smooth_poses(body, poses_raw["poses"], poses_raw["frames"], FPS, 3.0), atol=1e-12)
@@ -171,6 +171,7 @@ def test_the_track_panel_resmooths_a_finished_take_with_its_new_cutoff(addon_mod
     m.capture_dir, m.output_dir = str(walk), str(out)
     m.use_frame_range, m.frame_start, m.frame_end = True, 0, 7
     m.likelihood, m.particles, m.iterations, m.smoothing_hz = "silh+edge", 10, 2, 6.0
+    m.foot_lock = False  # smoothing alone (foot locking: tests/test_foot_contact.py)
     assert bpy.ops.mocap.track() == {"FINISHED"}
     assert "smoothed at 6 Hz" in m.status
     raw = np.load(out / "poses_raw.npz")

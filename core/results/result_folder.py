@@ -5,6 +5,9 @@ any reason keeps what it solved, and `--resume` continues from the checkpoint ex
     poses.npz    dof_names, frames, poses (F,D)
     joints_raw.npz, poses_raw.npz  once a finished take is smoothed (core/tracking/smoothing.py): the poses as solved;
                  joints.npz and poses.npz then hold the smoothed take
+    joints_unpinned.npz, poses_unpinned.npz  once a finished take's feet are locked (core/tracking/foot_lock.py): the
+                 take before the locking (smoothed when smoothing is on, else as solved); joints.npz and poses.npz
+                 then hold the take with its planted feet pinned, the one the animation files are made from
     keypoints.npz  with learned evidence: frames, cameras, uv (F,C,33,2) image pixels, visibility (F,C,33)
     report.json  settings, seed, per-frame energy, seconds and CPU seconds, totals, software versions
     checkpoint.npz  the tracker's state after the last solved frame (optimiser particles, RNG, colour model) as
@@ -77,6 +80,7 @@ def software_versions():
 
 class ResultWriter:
     RAW_FILES = ("joints_raw.npz", "poses_raw.npz")  # the solved take, beside a smoothed joints.npz / poses.npz
+    UNPINNED_FILES = ("joints_unpinned.npz", "poses_unpinned.npz")  # the take before its feet were locked
 
     def __init__(self, out_dir, body, settings, info=None, blender_version=None):
         self.out = require_writable_folder(out_dir)
@@ -131,25 +135,53 @@ class ResultWriter:
     def write_smoothed(self, poses, joints, smoothing):
         """The finished take's smoothed poses and joints become poses.npz and joints.npz; the solved ones are
         kept as poses_raw.npz and joints_raw.npz; report.json says how it was smoothed (`smoothing`)."""
+        self.write_finished(poses, joints, smoothing=smoothing)
+
+    def write_finished(self, poses, joints, smoothing=None, unpinned=None, foot_locking=None):
+        """The finished take's post-processed poses and joints become poses.npz and joints.npz. With `smoothing`
+        (how it was smoothed) the solved take is kept as *_raw.npz; with `foot_locking` (core/tracking/foot_lock.py's
+        report) the take before the feet were locked, `unpinned` = (poses, joints), is kept as *_unpinned.npz.
+        report.json says which was done; the files of the one not done go."""
         est = self.estimates
-        self._write_motion([e.pose for e in est], [e.joints for e in est], "_raw")
-        self.info["smoothing"] = {**smoothing, "raw": list(self.RAW_FILES)}
-        self.write(motion=(poses, joints))
+        if smoothing is not None:
+            self._write_motion([e.pose for e in est], [e.joints for e in est], "_raw")
+            self.info["smoothing"] = {**smoothing, "raw": list(self.RAW_FILES)}
+        else:
+            self._drop("smoothing", self.RAW_FILES)
+        if foot_locking is not None:
+            self._write_motion(*unpinned, "_unpinned")
+            self.info["foot_locking"] = {**foot_locking, "unpinned": list(self.UNPINNED_FILES)}
+        else:
+            self._drop("foot_locking", self.UNPINNED_FILES)
+        self._write_all(motion=(poses, joints))
+
+    def _drop(self, key, files):
+        self.info.pop(key, None)
+        for stale in files:
+            (self.out / stale).unlink(missing_ok=True)
 
     @property
     def holds_smoothed_take(self):
         """Whether the folder's joints.npz / poses.npz are a smoothed take (the solved one in RAW_FILES)."""
         return any((self.out / name).exists() for name in self.RAW_FILES)
 
+    @property
+    def holds_finished_take(self):
+        """Whether the folder's joints.npz / poses.npz are a post-processed take (smoothed, feet locked or both)."""
+        return any((self.out / name).exists() for name in self.RAW_FILES + self.UNPINNED_FILES)
+
     def write(self, motion=None):
         """Every result file for the estimates so far; `motion`: (poses, joints) to write instead of the
         solved ones (a smoothed take)."""
         est = self.estimates
-        if motion is None:  # the solved poses: a smoothing of an earlier finish no longer holds
+        if motion is None:  # the solved poses: a smoothing or foot locking of an earlier finish no longer holds
             motion = ([e.pose for e in est], [e.joints for e in est])
-            self.info.pop("smoothing", None)
-            for stale in self.RAW_FILES:
-                (self.out / stale).unlink(missing_ok=True)
+            self._drop("smoothing", self.RAW_FILES)
+            self._drop("foot_locking", self.UNPINNED_FILES)
+        self._write_all(motion)
+
+    def _write_all(self, motion):
+        est = self.estimates
         self._write_motion(*motion)
         with_landmarks = [e for e in est if getattr(e, "landmarks", None) is not None]
         if with_landmarks:  # the learned 2D evidence each frame was solved with

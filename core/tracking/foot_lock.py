@@ -1,0 +1,141 @@
+"""Foot locking: planted feet held still on the floor by refitting the legs of a finished take.
+
+For each contact (core/tracking/foot_contact.py) the planted point is held where the take puts it on average over
+the contact, along the floor; its height stays the take's (a heel rising as the step rolls onto the toes is
+motion, not slide). The correction a contact needs fades in and out over BLEND_FRAMES frames on either side,
+so the foot does not jump. On every frame, a contact point below the floor is raised onto it. The leg's DOFs
+(hip, knee, ankle) are then refitted by least squares so its foot points reach their targets, starting from
+the take's pose (core/evidence/keypoint_fit.py, fit_to_points); the rest of the body is not touched.
+
+The tracker's evidence still has the last word: a contact whose pinning would move the leg's joints farther than
+MAX_LEG_SHIFT from where the take has them (beyond what raising the foot onto the floor asks) is left as tracked.
+Measured against the images' own evidence (docs/defaults.md, "MAX_LEG_SHIFT"): within it, the pinned legs reproject
+onto the learned landmarks as well as the take's do.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .foot_contact import CONTACT_HEIGHT, CONTACT_SPEED, detect_contacts, feet, fit_floor
+
+# Frames over which a contact's correction fades in before it and out after it (docs/defaults.md, "BLEND_FRAMES").
+BLEND_FRAMES = 3
+# A pinning that moves a leg joint farther than this from the take (metres, the floor's lift apart) is not taken
+# (docs/defaults.md, "MAX_LEG_SHIFT").
+MAX_LEG_SHIFT = 0.02
+MOVED = 1e-5  # a frame whose targets are this close to the take keeps its pose (metres)
+
+
+class _Heads:
+    """The bone heads `fit_to_points` moves onto their targets (its rig_points interface)."""
+
+    def __init__(self, bones):
+        self.bones = np.asarray(bones, dtype=np.int64)
+
+    def world(self, body, poses):
+        return body.joint_positions(np.atleast_2d(poses))[:, self.bones]
+
+
+def _fade(n):
+    """Weights of the n frames next to a contact, from near 1 beside it to near 0 (a half cosine)."""
+    return 0.5 * (1 + np.cos(np.pi * np.arange(1, n + 1) / (n + 1)))
+
+
+def _tangential(p, normal):
+    return p - (p @ normal)[..., None] * normal
+
+
+def corrections(joints, foot_list, contacts, floor, frames, blend=BLEND_FRAMES):
+    """(F, n_feet, n_points, 3) displacement along the floor that pins each contact, faded in and out around it."""
+    F = len(joints)
+    n_pts = max(len(f.points) for f in foot_list)
+    out = np.zeros((F, len(foot_list), n_pts, 3))
+    inside = np.zeros((F, len(foot_list), n_pts), bool)
+    breaks = np.r_[0, np.flatnonzero(np.diff(frames) != 1) + 1, F]
+    for c in contacts:
+        p = joints[c.first:c.stop, foot_list[c.foot].points[c.point]]
+        tan = _tangential(p, floor.normal)
+        out[c.first:c.stop, c.foot, c.point] = tan.mean(axis=0) - tan
+        inside[c.first:c.stop, c.foot, c.point] = True
+    faded = out.copy()
+    for c in contacts:
+        run_start = breaks[breaks <= c.first].max()
+        run_stop = breaks[breaks > c.first].min()
+        w = _fade(blend)
+        for k in range(blend):  # before the contact, then after it; never into another contact or another run
+            for t, edge in ((c.first - 1 - k, c.first), (c.stop + k, c.stop - 1)):
+                if run_start <= t < run_stop and not inside[t, c.foot, c.point]:
+                    faded[t, c.foot, c.point] += w[k] * out[edge, c.foot, c.point]
+    return faded
+
+
+def _targets(joints, foot, k, shift, floor):
+    """(F, n_points, 3) targets of one foot's points: moved by its own correction where it has one, else by the
+    foot's other point's (the foot moves as one), then raised onto the floor."""
+    n = len(foot.points)
+    own = shift[:, k, :n]
+    has = np.linalg.norm(own, axis=-1) > 0  # (F,n)
+    move = own.copy()
+    for j in range(n):
+        for other in range(n):  # a point without a contact moves with one that has
+            borrow = ~has[:, j] & has[:, other]
+            move[borrow, j] = own[borrow, other]
+    target = joints[:, foot.points] + move
+    below = foot.clearance[None] - floor.height(target)  # how far each point is under the floor
+    lift = np.max(np.maximum(below, 0.0), axis=1)  # raise the foot by its lowest point's depth
+    return target + lift[:, None, None] * floor.normal, lift
+
+
+def _refit(body, poses, foot, targets, joints, fit_max_nfev=30):
+    """The leg's DOFs refitted per frame so its foot points reach `targets` (F,n,3) where they moved."""
+    from ..evidence.keypoint_fit import fit_to_points
+
+    out = poses.copy()
+    heads = _Heads(foot.points)
+    moved = np.linalg.norm(targets - joints[:, foot.points], axis=-1).max(axis=1) > MOVED
+    ok = np.ones(len(foot.points), bool)
+    for t in np.flatnonzero(moved):
+        out[t], _ = fit_to_points(body, heads, poses[t], targets[t], ok, dofs=foot.leg_dofs, max_nfev=fit_max_nfev)
+    return out
+
+
+def lock_feet(body, poses, frames, fps, height=CONTACT_HEIGHT, speed=CONTACT_SPEED, floor=None,
+              max_shift=MAX_LEG_SHIFT, blend=BLEND_FRAMES):
+    """A finished take's poses (F,D) of `frames` (F,) at `fps` -> (poses with the feet locked, a report dict for
+    report.json: the floor used, the contacts pinned and those left as tracked)."""
+    poses = np.asarray(poses, dtype=np.float64)
+    frames = np.asarray(frames, dtype=np.int64)
+    foot_list = feet(body)
+    joints = body.joint_positions(poses)
+    floor = fit_floor(joints, foot_list, fps, speed) if floor is None else floor
+    contacts = detect_contacts(joints, foot_list, floor, fps, frames, height, speed)
+    out = poses.copy()
+    kept, rejected = [], []
+    for k, foot in enumerate(foot_list):  # the legs are refitted apart: each moves only its own foot
+        mine = [c for c in contacts if c.foot == k]
+        while True:  # drop the contacts whose pinning moves the leg too far, until none does
+            shift = corrections(joints, foot_list, mine, floor, frames, blend)
+            targets, lift = _targets(joints, foot, k, shift, floor)
+            leg = _refit(body, poses, foot, targets, joints)
+            moved = body.joint_positions(leg)[:, foot.leg_bones]
+            distance = np.linalg.norm(moved - joints[:, foot.leg_bones], axis=-1).max(axis=1) - lift
+            too_far = [c for c in mine
+                       if np.any(distance[max(c.first - blend, 0):c.stop + blend] > max_shift)]
+            if not too_far:
+                break
+            rejected += too_far
+            mine = [c for c in mine if c not in too_far]
+        kept += mine
+        out[:, foot.leg_dofs] = leg[:, foot.leg_dofs]
+    report = {
+        "floor": floor.to_dict(),
+        "contact_height_m": float(height), "contact_speed_m_s": float(speed), "max_leg_shift_m": float(max_shift),
+        "blend_frames": int(blend),
+        "clearance_m": {name: round(float(c), 4) for f in foot_list for name, c in zip(f.names, f.clearance)},
+        "contacts": [c.to_dict(foot_list, frames) for c in kept],
+        "left_as_tracked": [c.to_dict(foot_list, frames) for c in rejected],
+    }
+    return out, report
+
+
+__all__ = ["BLEND_FRAMES", "MAX_LEG_SHIFT", "corrections", "lock_feet"]
