@@ -79,7 +79,8 @@ def test_calibrate_button_shows_height_and_segments(subject_with_actor, monkeypa
 
     log = _draw_all(bpy)
     labels = [e[1] for e in log if e[0] == "label"]
-    assert f"Actor {lines[0].split(', ')[0].removeprefix('height ')}" in labels and ("operator", "mocap.apply_actor_copy") in log
+    assert mod("addon.panels").actor_summary_header(lines[0]) in labels
+    assert ("operator", "mocap.apply_actor_copy") in log
     assert ("panel", "MOCAP_actor_summary", True) in log  # the lengths folded under the height's line
     assert ("prop", "calibrate_frames") in log and ("prop", "actor_height") in log and ("prop", "use_actor") in log
     # the measured segments, folded away, every one of the calibration's segments there; the header counts those set
