@@ -25,6 +25,17 @@ def cli_environment():
     return env
 
 
+def track_refused_before_tracking(out, capsys, *options):
+    """`track` on walk frames 0-3 with `options`: asserts it exits 2 before writing a frame; returns its stderr."""
+    from markerless_mocap.operators.cli import main
+
+    code = main(["track", "--scene", str(scene_dir("walk") / "subject.blend"), "--capture", str(scene_dir("walk")),
+                 "--out", str(out), "--frames", "0-3", *options])
+    assert code == 2
+    assert not (Path(out) / "poses.npz").exists()
+    return capsys.readouterr().err
+
+
 def load_scene_body(bpy, name="walk"):
     """(body, armature object) of the scene's subject.blend."""
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
