@@ -312,6 +312,29 @@ SCENES = {
                                                             "foot": 1.06 * 1.04, "spine": 1.06 * 0.98}),
                     subject_from="lobby"),
 }
+# issue 42 (other people in the room), rendered on 2026-11-27 before anything was tuned for it; never tune on it.
+# The actor stands, turns round and stands again (01_01 source frames 244-303: the only clips at hand are the two
+# the prior trains on). A second person dressed like the actor walks in (131_01 source frames 142-201: walking, then
+# slowing to a stop), passes between the actor and cam1/cam2 (hips 0.45 m from the actor's at the closest) and stops
+# beside it. Studio room (plates, constant light), so that the only difference from crossing_alone (the same scene
+# without the second person: same seed, cameras, light, motion and subject.blend) is the second person. Cameras are
+# placed by azimuth from the actor's first facing (the second person's path does not set them, unlike busy's).
+CROSSING = dict(bvh="01_01.bvh", start=244, n_frames=60, seed=4242, uncontrolled=False, calibration="toml",
+                cameras_from_facing=True,
+                cameras=[
+                    (5, 3.6, 1.60, 530, (4.5, -3.5), 0.7),
+                    (58, 3.8, 1.75, 555, (-5.0, 4.0), -1.0),
+                    (140, 3.5, 1.45, 515, (3.0, 6.0), 1.2),
+                    (228, 3.7, 1.85, 545, (-6.5, -2.0), -0.5)],
+                colours={"shirt": (0.09, 0.12, 0.17), "trousers": (0.03, 0.032, 0.04)})
+SCENES["crossing"] = dict(
+    CROSSING,
+    # the walk is turned about its last hips, which stand `stop` (azimuth from the actor's first facing in degrees,
+    # metres) from the actor's last hips, so that on its way it passes `pass_m` from the actor's hips at the closest,
+    # on the side of the azimuth `pass_side_deg` (between the actor and cam1 and cam2)
+    crossing=dict(bvh="131_01.bvh", start=142, stop=(92, 0.72), pass_m=0.45, pass_side_deg=45,
+                  colours={"shirt": (0.1, 0.12, 0.155), "trousers": (0.035, 0.035, 0.042)}))
+SCENES["crossing_alone"] = dict(CROSSING, subject_from="crossing")
 MASK_FRAMES = 5
 
 
@@ -606,11 +629,89 @@ def second_person_visibility(cams, P, P2):
         uv1, z1 = uv1.reshape(P.shape[0], -1, 2), z1.reshape(P.shape[0], -1)
         hip = 0   # Hips is the root, first in the rig's order
         lo, hi = uv1.min(axis=1), uv1.max(axis=1)
-        behind = ((uv2[:, hip] >= lo) & (uv2[:, hip] <= hi)).all(axis=1) & (z2[:, hip] > z1[:, hip])
+        over = ((uv2[:, hip] >= lo) & (uv2[:, hip] <= hi)).all(axis=1)
+        behind = over & (z2[:, hip] > z1[:, hip])
         out[cam.name] = dict(in_view_fraction=float((inside.mean(axis=1) >= 0.5).mean()),
                              behind_subject_frames=int(behind.sum()),
+                             in_front_of_subject_frames=int((over & ~behind).sum()),
                              depth_m=[float(z2[:, hip].min()), float(z2[:, hip].max())])
     return out
+
+
+def add_crossing_person(spec, data, data_dir, F, P, names, facing_deg):
+    """Issue 42's crossing: a second copy of the body, dressed like the subject, whose clip is turned about its last
+    hips (placed `stop` = (azimuth from the subject's first facing, metres) from the subject's last hips) so that its
+    hips pass `pass_m` from the subject's at the closest, on the `pass_side_deg` side. Returns its joints (F, B, 3),
+    its body object and a record (distances measured on the joints Blender evaluates)."""
+    from mathutils import Matrix
+    arm2, body2 = subject.build_subject(bpy, data, colours=spec.get("colours"))
+    arm2.name, body2.name = "Person2", "Person2Body"
+    _, res2, names2, *_ = retarget_scene(dict(bvh=spec["bvh"], start=spec["start"]), data_dir, arm2, F)
+    key_motion(arm2, res2, names2)
+    _, low2 = evaluated_joints_and_floor(arm2, body2, names2, F)
+    root = names.index("Hips")
+    hips = P[:, root, :2]
+    h2 = res2.pose_matrices[:, names2.index("Hips"), :2, 3]
+    a = math.radians(facing_deg + spec["stop"][0])
+    stop = hips[-1] + spec["stop"][1] * np.array([math.cos(a), math.sin(a)])
+    side = facing_deg + spec["pass_side_deg"]
+    best = None
+    for ang in np.radians(np.arange(0.0, 360.0, 0.25)):
+        c, s_ = math.cos(ang), math.sin(ang)
+        Rz = np.array([[c, -s_], [s_, c]])
+        rel = (h2 - h2[-1]) @ Rz.T + stop - hips
+        dist = np.linalg.norm(rel, axis=1)
+        k = int(dist.argmin())
+        az = math.degrees(math.atan2(rel[k, 1], rel[k, 0]))
+        if abs((az - side + 180) % 360 - 180) > 60:     # passing on the other side
+            continue
+        if best is None or abs(dist[k] - spec["pass_m"]) < best[0]:
+            best = (abs(dist[k] - spec["pass_m"]), ang, Rz)
+    if best is None or best[0] > 0.03:
+        raise RuntimeError(f"no turn of the second person's walk passes {spec['pass_m']} m from the subject")
+    G = np.eye(4)
+    G[:2, :2] = best[2]
+    G[:2, 3] = stop - best[2] @ h2[-1]
+    G[2, 3] = -float(np.median(low2))
+    arm2.matrix_world = Matrix(G.tolist())
+    P2, low2 = evaluated_joints_and_floor(arm2, body2, names2, F)
+    hip_d = np.linalg.norm(P2[:, root, :2] - hips, axis=1)
+    joint_d = np.linalg.norm(P2[:, :, None] - P[:, None], axis=3).min(axis=(1, 2))
+    speed = np.linalg.norm(np.diff(P2[:, root, :2], axis=0), axis=1) * FPS
+    return P2, body2, dict(
+        source=f"{spec['bvh']} frames {spec['start']}..{spec['start'] + F - 1} at {FPS} fps",
+        note="dressed like the subject; not in gt_joints or gt_masks (gt_masks are the subject's whole silhouette, "
+             "also where the second person hides it)",
+        armature_matrix_world=G.tolist(), clothing_colours_linear_rgb=spec.get("colours"),
+        closest_hips_m=float(hip_d.min()), closest_hips_frame=int(hip_d.argmin()),
+        closest_joints_m=float(joint_d.min()), closest_joints_frame=int(joint_d.argmin()),
+        last_frame_hips_m=float(hip_d[-1]), walking_speed_m_per_s=[float(speed.min()), float(speed.max())],
+        last_10_frames_speed_m_per_s=float(speed[-10:].max()), last_frame_speed_m_per_s=float(speed[-1]),
+        lowest_point_m=[float(low2.min()), float(low2.max())])
+
+
+def overlap_by_second_person(cam_objs, body, body2, cams, P, P2, frames):
+    """Per camera and frame, the fraction of the subject's silhouette that the second person's covers while its
+    hips are nearer the camera (Workbench masks of each body alone, every frame): where it hides the subject."""
+    tmp = Path(tempfile.mkdtemp(prefix="overlap_"))
+    try:
+        render_masks(cam_objs, body, tmp / "a", frames)
+        render_masks(cam_objs, body2, tmp / "b", frames)
+        out = {}
+        for ob, cam in zip(cam_objs, cams):
+            _, z1 = cam.project_with_depth(P[:, 0])
+            _, z2 = cam.project_with_depth(P2[:, 0])
+            frac = []
+            for f in frames:
+                a = cv2.imread(str(tmp / "a" / ob.name / f"{f:04d}.png"), cv2.IMREAD_GRAYSCALE) > 0
+                b = cv2.imread(str(tmp / "b" / ob.name / f"{f:04d}.png"), cv2.IMREAD_GRAYSCALE) > 0
+                frac.append(float((a & b).sum() / max(a.sum(), 1)) if z2[f] < z1[f] else 0.0)
+            frac = np.array(frac)
+            out[ob.name] = dict(hidden_fraction=np.round(frac, 3).tolist(), max_hidden=float(frac.max()),
+                                frames_hidden_over_20_percent=int((frac > 0.2).sum()))
+        return out
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def hand_statistics(P, names, face_m=0.15):
@@ -847,7 +948,19 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     hips = P[:, rootb]
     centre = (hips[:, :2].min(axis=0) + hips[:, :2].max(axis=0)) / 2
     cam_spec = cfg["cameras"]
+    root_rot = res.pose_matrices[0, rootb, :3, :3] @ rest[rootb, :3, :3].T   # root rotation from rest
+    fwd = root_rot @ np.array([0.0, -1.0, 0.0])                             # the rest pose faces -Y
+    yaw0 = math.atan2(fwd[1], fwd[0]) - math.atan2(-1.0, 0.0)
+    if cfg.get("cameras_from_facing"):   # azimuths from the way the subject faces at the first frame
+        cam_spec = [(math.degrees(math.atan2(fwd[1], fwd[0])) + az, *rest_) for az, *rest_ in cam_spec]
     second_info = None
+    body2 = None
+    if cfg.get("crossing"):
+        P2, body2, second_info = add_crossing_person(cfg["crossing"], data, data_dir, F, P, names,
+                                                     math.degrees(math.atan2(fwd[1], fwd[0])))
+        log(f"[{name}] second person: hips {second_info['closest_hips_m']:.3f} m from the subject's at frame "
+            f"{second_info['closest_hips_frame']}, joints {second_info['closest_joints_m']:.3f} m at frame "
+            f"{second_info['closest_joints_frame']}, {second_info['last_frame_hips_m']:.3f} m at the last frame")
     if cfg.get("second"):
         # cameras on the side of the path away from the second person (azimuths relative to that side)
         d = _unit(hips[-1, :2] - hips[0, :2])
@@ -864,7 +977,8 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     if second_info is not None:
         second_info["views"] = second_person_visibility(cams, P, P2)
         log(f"[{name}] second person: " + "; ".join(
-            f"{k}: in view {v['in_view_fraction']:.2f}, behind the subject {v['behind_subject_frames']} frames"
+            f"{k}: in view {v['in_view_fraction']:.2f}, behind the subject {v['behind_subject_frames']} frames, "
+            f"in front {v['in_front_of_subject_frames']}"
             for k, v in second_info["views"].items()))
 
     moving = stage.build_room(bpy, rng, cfg["uncontrolled"], grey=cfg.get("busy", False))
@@ -899,6 +1013,10 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     np.savez_compressed(out / "gt_joints.npz", names=np.array(names), frames=np.arange(F),
                         positions=P.astype(np.float64), fps=np.float64(FPS),
                         source=np.array(f"{cfg['bvh']} frames {cfg['start']}..{cfg['start'] + F - 1} at {FPS} fps"))
+    if cfg.get("crossing"):   # the other person's joints, to tell a switch onto it from a plain error
+        np.savez_compressed(out / "second_person_joints.npz", names=np.array(names), frames=np.arange(F),
+                            positions=P2.astype(np.float64), fps=np.float64(FPS),
+                            source=np.array(second_info["source"]))
     mask_frames = np.linspace(0, F - 1, MASK_FRAMES).round().astype(int).tolist()
     shutil.rmtree(out / "gt_masks", ignore_errors=True)
     if render:
@@ -913,9 +1031,12 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
                 encode_video(tmp / "frames" / ob.name, out / "videos" / f"{ob.name}.mp4",
                              np.random.default_rng([cfg["seed"], k]), noise, blur)
             if not cfg["uncontrolled"]:
-                body.hide_render = True
+                people = [b for b in (body, body2) if b is not None]
+                for b in people:
+                    b.hide_render = True
                 render_views(cam_objs, tmp / "plates", [0])
-                body.hide_render = False
+                for b in people:
+                    b.hide_render = False
                 (out / "background").mkdir(exist_ok=True)
                 for k, ob in enumerate(cam_objs):
                     img = cv2.imread(str(tmp / "plates" / ob.name / "0000.png"))
@@ -928,16 +1049,19 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     render_masks(cam_objs, body, out / "gt_masks", mask_frames)
+    if body2 is not None and cfg.get("crossing"):
+        second_info["hidden_by_second_person"] = overlap_by_second_person(cam_objs, body, body2, cams, P, P2,
+                                                                          list(range(F)))
+        log(f"[{name}] the second person hides the subject: " + "; ".join(
+            f"{k}: up to {v['max_hidden']:.2f}, > 20 % in {v['frames_hidden_over_20_percent']} frames"
+            for k, v in second_info["hidden_by_second_person"].items()))
     # the full scene, for inspection (not committed)
     bpy.ops.wm.save_as_mainfile(filepath=str(Path(tempfile.gettempdir()) / f"mocap_scene_{name}.blend"))
 
     # subject.blend: rest pose, near the first frame's root, with a seeded placement error
-    root_rot = res.pose_matrices[0, rootb, :3, :3] @ rest[rootb, :3, :3].T   # root rotation from rest
-    fwd = root_rot @ np.array([0.0, -1.0, 0.0])                             # the rest pose faces -Y
-    yaw0 = math.atan2(fwd[1], fwd[0]) - math.atan2(-1.0, 0.0)
     if cfg.get("subject_from"):
         placement = reuse_subject(out_root / cfg["subject_from"], out, hips[0], yaw0,
-                                  subject_data["bones"]["Hips"]["head"])
+                                  (subject_data if cfg.get("proportions") else data)["bones"]["Hips"]["head"])
     else:
         placement = save_subject_blend(data, out / "subject.blend", hips[0], yaw0, rng, colours=cfg.get("colours"))
     info = dict(scene=name, source=cfg["bvh"], first_source_frame_30fps=cfg["start"], n_frames=F, fps=FPS,

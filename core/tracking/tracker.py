@@ -15,6 +15,7 @@ import numpy as np
 from ..blas_threads import blas_threads
 from ..body.proxy import make_proxy
 from ..body.rotations import rotvec_to_matrix
+from ..capture.frames import DEFAULT_FPS
 from ..energy.likelihood import default_pose_at
 from ..evidence.view_presence import views_in_play
 from ..optimizers import PoseSpace, make_optimizer
@@ -25,6 +26,7 @@ from .first_frame import (KEYPOINT_INIT_TRANSLATION, KEYPOINT_INIT_YAW, keypoint
 from .limb_recovery import LimbRecovery
 from .local_fit import LocalFit
 from .observation import FrameObserver, background_models, expected_poses, guide_after_search, guide_before_search
+from .root_gate import RootGate
 from .settings import FrameEstimate, TrackingSettings
 
 NEXT = object()  # Tracker.track's default next frame: the one after
@@ -71,6 +73,9 @@ class Tracker:
         self.limb_recovery = LimbRecovery(body, capture.cameras, self.energy, self.space, self.root, s.seed,
                                           self._energy_fn, self.fit_locally if self.refines else None,
                                           self._particles_follow)
+        fps = getattr(capture.frames, "fps", None) or DEFAULT_FPS
+        self.root_gate = RootGate(self.space, body.translation_dofs, body.root_rotation_dofs, fps, s.seed,
+                                  self.fit_locally if self.refines else None, self._particles_follow)
         self.observation = None  # the frame loaded last (observation.Observation)
         self.views_in_play = None  # per camera, whether the image terms listen to it this frame
         self.views_left_out = {}  # {frame: [camera names]} left out of the image terms that frame
@@ -231,6 +236,7 @@ class Tracker:
             self.energy.init_color_model(pose)
         energy = float(self.energy(pose[None])[0])
         self.optimizer.start(self.to_relative(pose))
+        self.root_gate.start(frame)
         return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
 
     def track(self, frame, next_frame=NEXT):
@@ -257,6 +263,9 @@ class Tracker:
             energy, evaluations = float(self._energy_fn(estimate[None])[0]), evaluations + 1
         if self.evidence is not None:
             estimate, energy, evaluations = self.limb_recovery.recover(estimate, energy, evaluations, frame)
+        # a root that moved faster than a person can is refused and the frame searched again (root_gate.py)
+        estimate, energy, evaluations = self.root_gate.check(estimate, energy, evaluations, frame, self.history,
+                                                             self._energy_fn)
         pose = self.to_absolute(estimate)
         lam = self.settings.color_adaptation
         lam = self.energy.weights.adaptation if lam is None else lam
@@ -270,6 +279,12 @@ class Tracker:
     def recoveries(self):
         """The limb searches so far: {"frame", "limbs", "kept"} each."""
         return self.limb_recovery.recoveries
+
+    @property
+    def gated(self):
+        """The frames whose solution the root gate refused: {"frame", "speed_m_per_s", "kept_speed_m_per_s",
+        "limit_m_per_s"} each."""
+        return self.root_gate.gated
 
     def _record(self, frame, pose, energy, seconds, evaluations, cpu_seconds=None):
         self.history.append(self.to_relative(pose))
@@ -293,6 +308,7 @@ class Tracker:
                 "history": list(self.history), "color_model": [energy.color_model, energy.color_count],
                 "reference": [energy.reference_area, float(energy.reference_boundary)],
                 "limb_off_frames": dict(self.limb_recovery.off_frames),
+                "root_gate": self.root_gate.state(),
                 "next_guide": None if self.next_guide is None else [int(self.next_guide[0]), self.next_guide[1]]}
 
     def restore(self, state):
@@ -304,6 +320,7 @@ class Tracker:
         self.energy.reference_area, self.energy.reference_boundary = np.asarray(area), float(boundary)
         self.energy.color_model, self.energy.color_count = state["color_model"]
         self.limb_recovery.off_frames = {str(k): int(v) for k, v in state.get("limb_off_frames", {}).items()}
+        self.root_gate.restore(state.get("root_gate"))
         guide = state.get("next_guide")
         self.next_guide = None if guide is None else (int(guide[0]), np.asarray(guide[1], dtype=np.float64))
 

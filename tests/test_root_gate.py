@@ -1,0 +1,201 @@
+"""The root gate (core/tracking/root_gate.py): a solution whose root moved faster than a person can is refused and
+the frame searched again around the prediction; a fast but possible move passes untouched. On a synthetic energy
+with known minima, then wired into the tracker on the walk scene."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from markerless_mocap.core.optimizers import PoseSpace
+from markerless_mocap.core.tracking.root_gate import (FIRST_STEP_SLACK, MAX_ROOT_SPEED, ROOT_JITTER, RootGate,
+                                                      hold_root, root_step_limit)
+
+D = 30
+T, R = np.arange(3), np.arange(3, 6)  # root translation, root rotation
+FPS = 30.0
+
+
+def make_space():
+    lower, upper = np.full(D, -1.5), np.full(D, 1.5)
+    lower[:6], upper[:6] = -np.inf, np.inf
+    return PoseSpace.with_default_scale(lower, upper, [f"dof{i}" for i in range(D)], np.arange(D) < 3)
+
+
+def walking_history(speed=1.2):
+    """Two solved frames of a person walking along x at `speed` m/s, joints bent a little."""
+    a = np.linspace(-0.2, 0.2, D)
+    a[T] = [0.0, 0.0, 0.95]
+    b = a.copy()
+    b[0] += speed / FPS
+    return [a, b]
+
+
+def tracking_gate(space, history, **kw):
+    """A gate past its first step: frame 0 initialised, frame 1 (history[1]) solved at walking pace."""
+    gate = RootGate(space, T, R, FPS, **kw)
+    gate.start(0)
+    assert gate.check(history[1], 0.5, 10, 1, history[:1], None)[0] is history[1]
+    return gate
+
+
+def two_basins(near, far, near_depth=5.0):
+    """An energy with its deepest minimum at `far` (another person) and one `near_depth` higher at `near`."""
+    scale = make_space().scale
+
+    def energy(X):
+        X = np.atleast_2d(X)
+        e_near = (((X - near) / scale) ** 2).sum(axis=1) + near_depth
+        e_far = (((X - far) / scale) ** 2).sum(axis=1)
+        return np.minimum(e_near, e_far)
+    return energy
+
+
+def test_the_bound_follows_the_frame_rate_and_the_frames_apart():
+    assert root_step_limit(1, 30) == pytest.approx(MAX_ROOT_SPEED / 30 + ROOT_JITTER)
+    assert root_step_limit(1, 60) == pytest.approx(MAX_ROOT_SPEED / 60 + ROOT_JITTER)
+    assert root_step_limit(3, 30) == pytest.approx(3 * MAX_ROOT_SPEED / 30 + ROOT_JITTER)
+    # the issue's switch: 27.6 m/s between two frames (1.5 m within 10 frames) is over it at 30 and 60 fps
+    assert 27.6 / 30 > root_step_limit(1, 30) and 27.6 / 60 > root_step_limit(1, 60)
+    for bad in (0, -30, None):
+        with pytest.raises(ValueError, match="frame rate"):
+            root_step_limit(1, bad)
+
+
+def test_hold_root_moves_only_roots_beyond_the_ball():
+    centre = np.array([1.0, 2.0, 0.9])
+    X = np.zeros((2, D))
+    X[0, T] = centre + [0.1, 0.0, 0.0]
+    X[1, T] = centre + [3.0, 4.0, 0.0]
+    X[:, 10] = 0.7
+    held = hold_root(X, centre, 0.5, T)
+    np.testing.assert_array_equal(held[0], X[0])
+    np.testing.assert_allclose(held[1, T], centre + [0.3, 0.4, 0.0])
+    np.testing.assert_array_equal(held[:, 3:], X[:, 3:])
+
+
+def test_a_jump_of_the_root_is_refused_and_the_frame_searched_again():
+    """The frame's search found the deeper minimum 1.5 m away (the other person): the gate refuses it, searches
+    around the prediction and keeps the near minimum, the person walking on; the particles follow."""
+    space = make_space()
+    history = walking_history()
+    near = 2 * history[1] - history[0]  # where the person walks on to
+    near[12:16] += 0.15  # and an arm moved
+    far = near.copy()
+    far[T] += [0.3, 1.47, 0.0]  # 1.5 m away: 45 m/s at 30 fps
+    energy = two_basins(near, far)
+    steps = []
+    gate = tracking_gate(space, history, seed=3, follow=steps.append)  # the default budget, 200 x 15
+    found, found_energy, evaluations = gate.check(far.copy(), float(energy(far)[0]), 100, 2, history, energy)
+    step = np.linalg.norm(found[T] - history[1][T])
+    assert step <= root_step_limit(1, FPS) + 1e-9
+    assert np.linalg.norm(found[T] - near[T]) < 0.05  # the near minimum (the jump was 1.5 m), found again
+    # the search moves the arm towards the near minimum's: the prediction, its arm not moved, scores
+    # 5 + 4 x (0.15 / 5 degrees)^2 = 16.9
+    assert found_energy == pytest.approx(float(energy(found)[0])) and found_energy < 15.0
+    assert evaluations > 100 + 200 * 15  # the re-search's budget counted
+    assert len(gate.gated) == 1 and gate.gated[0]["frame"] == 2
+    assert gate.gated[0]["speed_m_per_s"] == pytest.approx(np.linalg.norm(far[T] - history[1][T]) * FPS, abs=1e-3)
+    assert gate.gated[0]["kept_speed_m_per_s"] <= gate.gated[0]["limit_m_per_s"]
+    assert len(steps) == 1 and np.allclose(steps[0], found - far)
+    assert gate.last_frame == 2
+
+
+def test_a_polished_research_stays_within_the_bound():
+    """The local fit after the re-search may pull the root back towards the far minimum: it is held on the bound."""
+    space = make_space()
+    history = walking_history()
+    near = 2 * history[1] - history[0]
+    far = near.copy()
+    far[T] += [1.5, 0.0, 0.0]
+    energy = two_basins(near, far)
+    gate = tracking_gate(space, history, seed=1, polish=lambda pose: far.copy(), particles=60, iterations=6)
+    found, _, _ = gate.check(far.copy(), 0.0, 0, 2, history, energy)
+    assert np.linalg.norm(found[T] - history[1][T]) <= root_step_limit(1, FPS) + 1e-9
+
+
+def test_a_fast_but_possible_move_passes_untouched():
+    """7.5 m/s for a frame (a jump's take-off, a fall) and a move over three frames that is fast only per frame:
+    nothing is searched, the estimate is returned as it came."""
+    space = make_space()
+    history = walking_history()
+
+    def never(X):
+        raise AssertionError("the gate searched a possible move")
+
+    gate = tracking_gate(space, history, follow=lambda step: never(None))
+    fast = history[1].copy()
+    fast[T] += [0.25, 0.0, 0.0]  # 7.5 m/s at 30 fps
+    got = gate.check(fast, 2.0, 7, 2, history, never)
+    assert got[0] is fast and got[1:] == (2.0, 7)
+    far = history[1].copy()
+    far[T] += [0.9, 0.0, 0.0]  # 0.9 m in 3 frames: 9 m/s
+    got = gate.check(far, 2.0, 7, 5, [history[0], fast], never)
+    assert got[0] is far and gate.gated == []
+
+
+def test_the_first_tracked_step_may_correct_the_placement():
+    """The first frame after the initial one may move the root FIRST_STEP_SLACK further (the initial estimate can
+    be as far off as the placement); the same step later is refused. The slack is kept across a checkpoint."""
+    space = make_space()
+    history = walking_history()
+    step = history[1].copy()
+    step[T] += [root_step_limit(1, FPS) + FIRST_STEP_SLACK / 2, 0.0, 0.0]
+
+    def flat(X):
+        return np.zeros(len(X))
+
+    gate = RootGate(space, T, R, FPS, particles=20, iterations=2)
+    gate.start(1)
+    again = RootGate(space, T, R, FPS)
+    again.restore(gate.state())
+    for g in (gate, again):
+        assert g.check(step, 0.0, 0, 2, history, flat)[0] is step and g.gated == []
+        held = g.check(step + (step - history[1]), 0.0, 0, 3, [history[1], step], flat)[0]
+        assert np.linalg.norm(held[T] - step[T]) <= root_step_limit(1, FPS) + 1e-9
+        assert [x["frame"] for x in g.gated] == [3]
+    old = RootGate(space, T, R, FPS)
+    old.restore(None)  # a checkpoint from before the gate
+    assert old.last_frame is None and not old.first_step
+
+
+def test_without_a_history_the_first_frame_only_starts_the_gate():
+    gate = RootGate(make_space(), T, R, FPS)
+    x = np.zeros(D)
+    assert gate.check(x, 1.0, 1, 4, [], None)[0] is x and gate.last_frame == 4
+
+
+def test_the_tracker_refuses_a_jump_of_its_search(monkeypatch):
+    """Wired into the tracker (walk scene): the search's estimate of frame 1 is moved 1.5 m; the tracker refuses it,
+    searches again and lands near the truth; report data and checkpoint state say so."""
+    pytest.importorskip("bpy")
+    from scene_helpers import ground_truth_poses, scene_dir
+
+    from markerless_mocap.core.capture.capture import load_capture
+    from markerless_mocap.core.tracking.motion_library import build_motion_models, scene_exclusion
+    from markerless_mocap.core.tracking.settings import TrackingSettings
+    from markerless_mocap.core.tracking.tracker import Tracker
+
+    body, _, gt, _ = ground_truth_poses("walk")
+    capture = load_capture(scene_dir("walk"))
+    try:
+        prior, dynamics = build_motion_models(body, fps=capture.frames.fps, exclude=scene_exclusion(scene_dir("walk")))
+        # without the local fit, which would pull a moved root back onto the person before the gate sees it
+        tracker = Tracker(body, capture, TrackingSettings(particles=60, iterations=5, prefetch=False, refine="none"),
+                          prior=prior, dynamics=dynamics)
+        search = tracker.optimizer.track_frame
+
+        def jumped(energy, history):
+            result = search(energy, history)
+            estimate = result.estimate.copy()
+            estimate[body.translation_dofs] += [1.2, 0.9, 0.0]
+            return dataclasses.replace(result, estimate=estimate)
+
+        monkeypatch.setattr(tracker.optimizer, "track_frame", jumped)
+        tracker.initialise(0, initial_pose=gt[0])
+        est = tracker.track(1, next_frame=None)
+    finally:
+        capture.close()
+    hips_error = np.linalg.norm(est.pose[body.translation_dofs] - gt[1][body.translation_dofs])
+    assert hips_error < 0.06, f"hips {hips_error:.3f} m from the truth after the re-search"
+    assert [g["frame"] for g in tracker.gated] == [1] and tracker.gated[0]["speed_m_per_s"] > 40
+    assert tracker.state()["root_gate"] == {"last_frame": 1, "first_step": False}
