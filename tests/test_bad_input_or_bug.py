@@ -26,7 +26,10 @@ INPUT_ERRORS = [
     ("core.results.evaluation", "EvaluationError"), ("addon.scene_bridge", "SubjectError"),
     ("core.render", "BackendUnavailableError"), ("core.tracking.checkpoint", "CheckpointError"),
     ("operators.track", "TrackSetupError"), ("operators.export", "ExportError"),
-    ("operators.import_capture", "ClipLoadError"),
+    ("operators.import_capture", "ClipLoadError"), ("core.batch.plan", "PlanError"),
+    ("core.batch.chunk_folder", "ChunkError"), ("core.tracking.foot_contact", "FootContactError"),
+    ("operators.track_batch", "BatchSetupError"), ("operators.track_batch", "ResultMismatchError"),
+    ("core.batch.takes", "TakeListError"),
 ]
 # the engine's own contracts between its parts, and what the machine or the build refuses: raised, they are bugs
 # (a ResultWriteError is an OSError: the disk or the folder, reported as the user's like any OSError)

@@ -26,7 +26,8 @@ def walk():
     body, _ = load_scene_body(bpy, "walk")
     names, frames, positions = load_joints(scene_dir("walk") / "gt_joints.npz")
     truth = positions[:, [names.index(b) for b in body.skeleton.bone_names]]
-    with np.load(scene_dir("walk") / "example_result" / "poses.npz") as data:  # default settings, seed 0
+    # default settings, seed 0; the take before foot locking (the bundled result's poses.npz is the locked one)
+    with np.load(scene_dir("walk") / "example_result" / "poses_unpinned.npz") as data:
         poses, pose_frames = data["poses"], data["frames"]
     return body, truth, frames, poses, pose_frames
 
