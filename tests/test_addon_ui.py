@@ -719,7 +719,7 @@ def test_run_on_shows_its_settings_and_a_running_batch_its_chunks(addon_module_n
     assert {"scheduler_address", "worker_command", "batch_folder", "chunk_frames"} <= props
     assert "local_workers" not in props
     # a batch running: its chunks in the bar, a Cancel button (no modal operator to take Esc)
-    m.is_tracking, m.batch_dir, m.chunks_done, m.chunks_total, m.progress = True, "/tmp/b", 3, 8, 3 / 8
+    m.is_tracking, m.batch_dir, m.chunks_done, m.chunks_total, m.progress = True, "batch_out", 3, 8, 3 / 8
     log = _draw_all(bpy)
     assert ("progress", pytest.approx(3 / 8), "3/8 chunks") in log
     assert ("operator", "mocap.cancel_batch") in log
