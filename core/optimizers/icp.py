@@ -71,6 +71,9 @@ class IcpProblem:
     # (a hand in front of the torso has no rim).
     keypoints: object | None = None
     rig_points: object | None = None
+    # Per view, where other tracked actors' bodies are (bool, at this problem's resolution), or None: contour
+    # there may be theirs and this actor's rim there may be hidden, so neither makes a correspondence.
+    others: list | None = None
 
     def __post_init__(self):
         if len(self.cameras) == 0:
@@ -89,6 +92,10 @@ class IcpProblem:
                                       f"silhouette's resolution")
             sils.append(sil > 0)
         self.silhouettes = sils
+        if self.others is not None:
+            if len(self.others) != len(sils) or any(np.shape(o) != s.shape for o, s in zip(self.others, sils)):
+                raise IcpProblemError("give the other actors' masks one per camera, each the silhouette's size")
+            self.others = [np.asarray(o, dtype=bool) for o in self.others]
         if self.to_absolute is None:
             self.to_absolute = _identity
         if self.prior is not None and not (hasattr(self.prior, "energy") and hasattr(self.prior, "gradient")):
@@ -110,13 +117,14 @@ class ContourField:
     normals: np.ndarray  # (N,2) outward unit normal at each
     tree: object | None
     n_contour: int
+    excluded: np.ndarray | None = None  # (H,W) bool: pixels another actor covers (no rim point there counts)
 
     @classmethod
-    def from_silhouette(cls, silhouette, smoothing: float = 1.0) -> "ContourField":
+    def from_silhouette(cls, silhouette, smoothing: float = 1.0, excluded=None) -> "ContourField":
         sil = np.asarray(silhouette, dtype=bool)
         rows, cols = np.nonzero(np.any(sil, axis=1)), np.nonzero(np.any(sil, axis=0))
         if len(rows[0]) == 0:
-            return cls(np.zeros((0, 2)), np.zeros((0, 2)), None, 0)
+            return cls(np.zeros((0, 2)), np.zeros((0, 2)), None, 0, excluded)
         # The box with a ring wide enough that the Gaussian (radius 4 sigma) and the gradient see only
         # zeros beyond it: the result equals the full image's.
         H, W = sil.shape
@@ -134,7 +142,22 @@ class ContourField:
         length = np.linalg.norm(g, axis=-1, keepdims=True)
         g = np.divide(g, length, out=np.zeros_like(g), where=length > 1e-12)
         points = np.stack([cx + x0, cy + y0], axis=-1).astype(np.float64)
-        return cls(points, g, cKDTree(points), len(points))
+        if excluded is not None:  # the others' outline, or this actor's against theirs: not this actor's contour
+            keep = ~excluded[cy + y0, cx + x0]
+            points, g = points[keep], g[keep]
+            if len(points) == 0:
+                return cls(np.zeros((0, 2)), np.zeros((0, 2)), None, 0, excluded)
+        return cls(points, g, cKDTree(points), len(points), excluded)
+
+    def excludes(self, rows, cols):
+        """(n,) bool: which pixels lie where another actor is (out of the image: no)."""
+        if self.excluded is None:
+            return np.zeros(len(rows), dtype=bool)
+        h, w = self.excluded.shape
+        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        out = np.zeros(len(rows), dtype=bool)
+        out[inside] = self.excluded[rows[inside], cols[inside]]
+        return out
 
     def lookup(self, rows, cols):
         """Nearest contour point (x, y; the true outline runs about half a pixel outside the contour
@@ -271,6 +294,7 @@ def find_correspondences(vertices, proxy_faces, edges, cameras, fields, d_max, c
         p, n = fld.lookup(row, col)
         ok = np.linalg.norm(rim.uv - p, axis=1) <= d_max
         ok &= np.einsum("ni,ni->n", rim.normal, n) >= cos_min
+        ok &= ~fld.excludes(row, col)
         views.append(np.full(int(ok.sum()), v))
         verts.append(rim.vertex[ok])
         targets.append(p[ok])
@@ -335,7 +359,8 @@ class IcpSolver:
             raise IcpProblemError(f"the body has {body.n_dof} DOF but the pose space {space.dim}: build both "
                                   f"from the same body")
         self.edges = MeshEdges.from_faces(proxy.faces)
-        self.fields = [ContourField.from_silhouette(s) for s in problem.silhouettes]
+        others = problem.others or [None] * len(problem.silhouettes)
+        self.fields = [ContourField.from_silhouette(s, excluded=o) for s, o in zip(problem.silhouettes, others)]
         self.descendants = descendant_matrix(body.skeleton)
         self.weights = np.where(proxy.unweighted[:, None], 0.0, proxy.weights)
 

@@ -7,13 +7,14 @@ numba is optional: backend "auto" uses it when it imports, else warns once and u
 "gpu" is the GLSL path (glsl.py's shaders, run by addon/gpu_likelihood.py on Blender's gpu module). It is
 never chosen here by "auto" (that needs a probe in a subprocess: operators/backend_choice.py); it exists
 in a process once the host has called `register_gpu`. It computes the silhouette and edge statistics; a
-call that needs the template's chamfer transform or colour histograms runs on the CPU path instead.
+call that needs the template's chamfer transform or colour histograms, or whose targets mark other actors'
+pixels (reference.OTHERS), runs on the CPU path instead.
 """
 import warnings
 
 import numpy as np
 
-from .reference import (BOUNDARY, BOUNDARY_OFF, N_BINS, N_STATS, OVERLAP, SUM_DI, SUM_DT, SUM_EDGE_DT, TEMPLATE,
+from .reference import (BOUNDARY, BOUNDARY_OFF, N_BINS, N_STATS, OTHERS, OVERLAP, SUM_DI, SUM_DT, SUM_EDGE_DT, TEMPLATE,
                         FrameTargets, RenderInputError, ab_to_bins, boundary_mask, chamfer_34, project_views, rasterize,
                         render_view)
 from ..errors import InputError
@@ -78,7 +79,7 @@ def measure_poses(body, proxy, poses, cameras, faces, face_label, targets, need_
                   backend="auto"):
     """Poses (P,D) -> skinned proxy in every camera -> `statistics`. The GPU path skins in its vertex
     shader; the CPU paths (and the GPU backend for chamfer or colour statistics) skin here."""
-    if resolve_backend(backend) == "gpu" and not need_chamfer and not n_parts:
+    if resolve_backend(backend) == "gpu" and not need_chamfer and not n_parts and not targets.has_others:
         return _gpu_measure(body, proxy, poses, cameras, faces, face_label, targets, cull), \
             np.zeros((len(poses), len(cameras), 0, 2, N_BINS), dtype=np.int64)
     vertices = proxy.deform(body, poses)
@@ -99,5 +100,5 @@ def measure_vertices(vertices, cameras, faces, face_label, targets, need_chamfer
 
 __all__ = ["statistics", "measure_vertices", "measure_poses", "resolve_backend", "register_gpu",
            "cpu_backend", "BackendUnavailableError", "FrameTargets", "RenderInputError", "project_views", "rasterize",
-           "render_view", "boundary_mask", "chamfer_34", "ab_to_bins", "N_STATS", "N_BINS", "TEMPLATE", "OVERLAP",
-           "SUM_DI", "SUM_DT", "BOUNDARY", "BOUNDARY_OFF", "SUM_EDGE_DT", "BACKENDS"]
+           "render_view", "boundary_mask", "chamfer_34", "ab_to_bins", "N_STATS", "N_BINS", "OTHERS", "TEMPLATE",
+           "OVERLAP", "SUM_DI", "SUM_DT", "BOUNDARY", "BOUNDARY_OFF", "SUM_EDGE_DT", "BACKENDS"]

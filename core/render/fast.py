@@ -22,8 +22,8 @@ import numpy as np
 from numba import prange
 
 from ..jit import jit
-from .reference import (BOUNDARY, BOUNDARY_OFF, MAX_COORD_PX, N_BINS, N_STATS, OVERLAP, SUBPIXEL, SUM_DI, SUM_DT,
-                        SUM_EDGE_DT, TEMPLATE, Z_NEAR, FrameTargets, snap)
+from .reference import (BOUNDARY, BOUNDARY_OFF, MAX_COORD_PX, N_BINS, N_STATS, OTHERS, OVERLAP, SUBPIXEL, SUM_DI,
+                        SUM_DT, SUM_EDGE_DT, TEMPLATE, Z_NEAR, FrameTargets, snap)
 
 _BIG = 1 << 28  # 'no template pixel yet' in the int32 chamfer buffer (x3 units: ~90 million px)
 
@@ -170,7 +170,7 @@ def _chamfer_sum(labels, ty0, ty1, tx0, tx1, obs, oy0, oy1, ox0, ox1, dt, cap_un
         for x in range(ux1 + 1, ux0, -1):
             v = min(dt[y, x], dt[y + 1, x - 1] + 4, dt[y + 1, x] + 3, dt[y + 1, x + 1] + 4, dt[y, x + 1] + 3)
             dt[y, x] = v
-            total += min(v, cap_units) * obs[y - 1, x - 1]  # obs is 0 outside the observed silhouette
+            total += min(v, cap_units) * (obs[y - 1, x - 1] == 1)  # observed pixels only (not OTHERS)
     return total / 3.0
 
 
@@ -215,15 +215,17 @@ def _one_task(q, iz, faces, face_label, cull, w, h, sil, sil_dt, edge_off, edge_
             if lab == 0:
                 continue
             xm, xp = max(x - 1, 0), min(x + 1, w - 1)
-            n_t += 1
-            n_overlap += sil[y, x]
-            sum_di += sil_dt[y, x]
+            s_obs = sil[y, x]
+            if s_obs != OTHERS:  # another actor's pixel counts for nothing (reference.py)
+                n_t += 1
+                n_overlap += s_obs
+                sum_di += sil_dt[y, x]
             b = ((labels[ym, x] != lab) | (labels[yp, x] != lab) | (labels[y, xm] != lab)
                  | (labels[y, xp] != lab))
             n_b += b
             n_off += b * edge_off[y, x]
             sum_edt += b * edge_dt[y, x]
-            if need_color:
+            if need_color and s_obs != OTHERS:
                 s = lab - 1
                 hist_out[s, 0, ab_bins[y, x, 0]] += 1
                 hist_out[s, 1, ab_bins[y, x, 1]] += 1

@@ -26,6 +26,11 @@ Statistics of one pose in one view (columns of the (P, C, N_STATS) array), again
   BOUNDARY_OFF  #boundary pixels not on an image edge (sum of E_v, E = 0 on edges, eq. 9)
   SUM_EDGE_DT   sum of the truncated edge distance map over boundary pixels (e^Ch)
 plus, with colour on, per-part a/b histograms of the visible body pixels (P, C, S, 2, K).
+
+Several actors: a silhouette pixel may hold OTHERS, where another tracked actor's body is. Given the others'
+poses, the binary silhouette of all actors together does not depend on this actor's body there (whoever is in
+front, the pixel is a body pixel), so those pixels count for nothing: TEMPLATE, OVERLAP, SUM_DI and the
+histograms skip them, SUM_DT and the observed count read only value 1 (docs/how-it-tracks.md, "Several actors").
 """
 from __future__ import annotations
 
@@ -40,6 +45,7 @@ N_BINS = 64  # colour histogram bins per channel (eq. 10, K = 64)
 
 TEMPLATE, OVERLAP, SUM_DI, SUM_DT, BOUNDARY, BOUNDARY_OFF, SUM_EDGE_DT = range(7)
 N_STATS = 7
+OTHERS = 2  # silhouette value of the pixels another tracked actor covers (see above)
 
 
 class RenderInputError(ValueError):
@@ -55,7 +61,7 @@ class FrameTargets:
 
     widths: np.ndarray  # (C,) int64
     heights: np.ndarray  # (C,) int64
-    silhouette: np.ndarray  # (C,H,W) uint8, 1 on the observed subject
+    silhouette: np.ndarray  # (C,H,W) uint8, 1 on the observed subject, OTHERS where another actor is
     silhouette_dt: np.ndarray  # (C,H,W) float64, distance to the observed silhouette (energy pixels)
     edge_off: np.ndarray  # (C,H,W) uint8, E_v: 0 on image edges, 1 elsewhere
     edge_dt: np.ndarray  # (C,H,W) float64, truncated distance to the nearest image edge (energy pixels)
@@ -83,11 +89,13 @@ class FrameTargets:
             raise RenderInputError(f"FrameTargets.ab_bins has shape {self.ab_bins.shape}; expected {(C, H, W, 2)}")
         if len(self.widths) != C or len(self.heights) != C or np.any(self.widths > W) or np.any(self.heights > H):
             raise RenderInputError("FrameTargets: one width and height per view, each within the padded size")
-        self.observed_count = np.array([int(self.silhouette[c].sum()) for c in range(C)], dtype=np.int64)
+        observed = self.silhouette == 1
+        self.observed_count = np.array([int(observed[c].sum()) for c in range(C)], dtype=np.int64)
+        self.has_others = bool(np.any(self.silhouette == OTHERS))
         box = np.zeros((C, 4), dtype=np.int64)  # y0, y1, x0, x1 inclusive; y1 < y0 when empty
         box[:, 1] = -1
         for c in range(C):
-            ys, xs = np.nonzero(self.silhouette[c])
+            ys, xs = np.nonzero(observed[c])
             if ys.size:
                 box[c] = ys.min(), ys.max(), xs.min(), xs.max()
         self.observed_box = box
@@ -95,6 +103,17 @@ class FrameTargets:
     @property
     def n_views(self):
         return len(self.widths)
+
+    def with_others(self, masks):
+        """These targets with the pixels of `masks` ((C,H,W) bool: where the other actors' bodies are) set to
+        OTHERS, and no edge cost there either (this actor's outline behind another is hidden)."""
+        masks = np.asarray(masks, dtype=bool)
+        if masks.shape != self.silhouette.shape:
+            raise RenderInputError(f"the other actors' masks have shape {masks.shape}; expected "
+                                   f"{self.silhouette.shape} like the silhouettes")
+        return FrameTargets(self.widths, self.heights, np.where(masks, OTHERS, self.silhouette),
+                            self.silhouette_dt, np.where(masks, 0, self.edge_off), np.where(masks, 0.0, self.edge_dt),
+                            self.ab_bins, self.chamfer_cap)
 
     @property
     def chamfer_cap_units(self) -> int:
@@ -264,15 +283,17 @@ def view_statistics(labels, targets: FrameTargets, view, need_chamfer=True, n_pa
     """The statistics row (N_STATS,) and part histograms (n_parts, 2, K) of one label image."""
     h, w = int(targets.heights[view]), int(targets.widths[view])
     labels = np.asarray(labels)[:h, :w]
-    sil = labels > 0
-    obs = targets.silhouette[view, :h, :w] > 0
+    drawn = labels > 0
+    observed = targets.silhouette[view, :h, :w]
+    obs = observed == 1
+    sil = drawn & (observed != OTHERS)  # the template where no other actor is
     boundary = boundary_mask(labels)
     stats = np.zeros(N_STATS)
     stats[TEMPLATE] = sil.sum()
     stats[OVERLAP] = (sil & obs).sum()
     stats[SUM_DI] = targets.silhouette_dt[view, :h, :w][sil].sum()
-    if need_chamfer and sil.any() and obs.any():
-        stats[SUM_DT] = np.minimum(chamfer_34(sil)[obs], targets.chamfer_cap_units / 3.0).sum()
+    if need_chamfer and drawn.any() and obs.any():
+        stats[SUM_DT] = np.minimum(chamfer_34(drawn)[obs], targets.chamfer_cap_units / 3.0).sum()
     stats[BOUNDARY] = boundary.sum()
     stats[BOUNDARY_OFF] = targets.edge_off[view, :h, :w][boundary].sum()
     stats[SUM_EDGE_DT] = targets.edge_dt[view, :h, :w][boundary].sum()
