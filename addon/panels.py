@@ -77,11 +77,17 @@ class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
 
 def _draw_armature(layout, props, context):
     """The Armature field, and while it is empty the armature tracking will use: the scene's only one, or a
-    request to pick one when there are several (tracking would stop there)."""
+    request to pick one when there are several (tracking would stop there), or all of them as several actors."""
+    armatures = [o.name for o in context.scene.objects if o.type == "ARMATURE"]
+    if len(armatures) > 1:
+        layout.prop(props, "every_armature")
+        if props.every_armature:
+            _wrapped(layout, f"Tracks {len(armatures)} actors at once: {', '.join(sorted(armatures))}", context,
+                     icon="COMMUNITY")
+            return
     if props.armature is not None:
         layout.prop(props, "armature")
         return
-    armatures = [o.name for o in context.scene.objects if o.type == "ARMATURE"]
     row = layout.row()
     row.alert = len(armatures) > 1
     row.prop(props, "armature")

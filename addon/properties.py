@@ -104,6 +104,10 @@ class MocapSettings(bpy.types.PropertyGroup):
     # ---- subject
     armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature,
                               description="The rigged character to track (a mesh must be skinned to it)")
+    every_armature: BoolProperty(
+        name="Track Every Armature", default=False,
+        description="Several actors: track every armature of the scene at once, each placed roughly on its own "
+                    "person; each is keyed and exported on its own (in the output folder's actors/<armature>/)")
     subject_checked: BoolProperty(name="Checked", default=False, description="The rig check has run")
     subject_dofs: IntProperty(name="DOF", default=0, description="Degrees of freedom the tracker will solve")
     subject_preset: StringProperty(name="Preset", description="Rig naming the bones were matched with")

@@ -53,7 +53,9 @@ def add_arguments(p):
     p.add_argument("--capture", type=Path, required=True, help="capture folder (calibration + videos/)")
     p.add_argument("--out", type=Path, required=True, help="result folder")
     p.add_argument("--frames", help="capture frames A-B, inclusive, from 0 (default: all)")
-    p.add_argument("--armature", help="armature to track if the scene has several")
+    p.add_argument("--armature", action="append",
+                   help="armature to track if the scene has several; repeat it to track several actors at once, "
+                        "each placed roughly at its person (results in OUT/actors/NAME/)")
     p.add_argument("--resume", action="store_true", help="continue after the last solved frame in --out")
     p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
     p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
@@ -186,8 +188,11 @@ def run(args):
     except BackendUnavailableError as exc:
         print(f"markerless_mocap track: {exc}", file=sys.stderr)
         return 2
+    names = args.armature or [None]
+    if len(names) > 1:
+        return run_cast(args, scene, names, choice)
     try:
-        armature = find_armature(scene, args.armature)
+        armature = find_armature(scene, names[0])
         actor = load_actor_option(args, scene, armature, choice.used)
         session = TrackSession(scene, armature, args.capture, args.out, settings_from_args(args, choice.used),
                                frames=parse_frames(args.frames), resume=args.resume,
@@ -217,6 +222,46 @@ def run(args):
         from ..addon import gpu_likelihood
         gpu_likelihood.release()
     finish_and_list(session, args, f"tracked {session.n_done} frames")
+    return 0
+
+
+def run_cast(args, scene, names, choice):
+    """`track` with several --armature: every actor in one frame loop (operators/cast_session.py)."""
+    from ..addon.scene_bridge import find_armature
+    from .cast_session import CastError, CastSession
+    from .failures import USER_ERRORS, cli_failure
+
+    try:
+        if args.calibrate or args.actor is not None:
+            raise CastError("--calibrate and --actor track one actor: calibrate each actor with `calibrate "
+                            "--armature NAME` and track them together without them, or track each on its own")
+        armatures = [find_armature(scene, name) for name in names]
+        cast = CastSession(scene, armatures, args.capture, args.out, settings=settings_from_args(args, choice.used),
+                           frames=parse_frames(args.frames), resume=args.resume,
+                           log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), smooth_hz=args.smooth,
+                           foot_lock=args.foot_lock, foot_lock_speed=args.foot_lock_speed)
+    except USER_ERRORS as exc:
+        return cli_failure("track", exc)
+    print(f"likelihood backend: {choice.used} ({choice.reason}); {len(armatures)} actors: {', '.join(names)}",
+          file=sys.stderr)
+    for session in cast.sessions:
+        session.writer.info["backend"] = choice.to_dict()
+    if args.resume:
+        cast.key_all()
+    try:
+        run_session(cast)
+    except KeyboardInterrupt:
+        print(f"interrupted: {cast.n_done} frames solved and saved in {args.out} (use --resume to continue)",
+              file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001  (a frame's footage the user must fix, or a bug: said which)
+        code = cli_failure("track", exc)
+        print(f"{cast.n_done} frames solved and saved in {args.out} (use --resume to continue)", file=sys.stderr)
+        return code
+    written = cast.finish(export=not args.no_export, overlays=not args.no_overlays, save_blend=not args.no_export)
+    print(f"tracked {cast.n_done} frames of {len(armatures)} actors -> {args.out}", file=sys.stderr)
+    for name, files in written.items():
+        print(f"  {name}: {files}", file=sys.stderr)
     return 0
 
 

@@ -23,6 +23,16 @@ def subject_armature(context):
     return props.armature
 
 
+def subject_armatures(context):
+    """The armatures Track solves: every armature of the scene (by name) when the Subject panel says so and
+    there are several, else the one of `subject_armature`."""
+    if context.scene.mocap.every_armature:
+        armatures = sorted((o for o in context.scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
+        if len(armatures) > 1:
+            return armatures
+    return [subject_armature(context)]
+
+
 def check_subject(context):
     """Build the engine's body from the subject; return a summary dict (an InputError names a problem)."""
     from ..addon.scene_bridge import body_from_blender, find_skinned_mesh

@@ -75,14 +75,17 @@ def build_session(context, log=None, step=None):
     `log(message)` receives the session's messages, `step(text, fraction)` its one-off preparation
     (text None when it is over); both may be called from any thread.
     """
-    from .setup_subject import subject_armature
+    from .setup_subject import subject_armatures
 
     props = context.scene.mocap
     if not props.capture_dir:
         raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
-    armature = subject_armature(context)
+    armatures = subject_armatures(context)
     settings, choice = run_settings(context)
     capture_dir = Path(bpy.path.abspath(props.capture_dir))
+    if len(armatures) > 1:
+        return _cast_session(context, armatures, capture_dir, settings, choice, log, step)
+    armature = armatures[0]
     extra = {}
     if props.use_actor and props.actor_file:  # the Calibrate step's result (Subject panel)
         from ..core.actor.actor_file import load_actor
@@ -96,6 +99,23 @@ def build_session(context, log=None, step=None):
     if writer is not None:
         writer.info["backend"] = choice.to_dict()  # report.json
     return session
+
+
+def _cast_session(context, armatures, capture_dir, settings, choice, log, step):
+    """Several actors (operators/cast_session.py): every armature solved in one frame loop."""
+    from .cast_session import CastSession
+
+    props = context.scene.mocap
+    if props.use_actor and props.actor_file:
+        raise TrackSetupError("An actor calibration applies to one actor: untick 'Track with Calibration' to track "
+                              "every armature, or untick 'Track Every Armature'")
+    cast = CastSession(context.scene, armatures, capture_dir, output_folder(context), settings=settings,
+                       frames=props.frame_range(), resume=props.resume, log=log, step=step,
+                       units=None if props.units == "auto" else props.units, smooth_hz=props.smoothing_hz,
+                       foot_lock=props.foot_lock, foot_lock_speed=props.foot_lock_speed)
+    for session in cast.sessions:
+        session.writer.info["backend"] = choice.to_dict()  # report.json
+    return cast
 
 
 class TrackJob(WorkerJob):
@@ -338,6 +358,12 @@ class MOCAP_OT_track(bpy.types.Operator):
         if context.scene.mocap.run_on != "this":  # chunks on local processes or a cluster: track_batch.py
             from .track_batch import start
 
+            if context.scene.mocap.every_armature and \
+                    sum(o.type == "ARMATURE" for o in context.scene.objects) > 1:
+                context.scene.mocap.last_error = ("Several actors run on this Blender only: set 'Run on' to This "
+                                                  "Blender, or untick 'Track Every Armature'")
+                self.report({"ERROR"}, context.scene.mocap.last_error)
+                return {"CANCELLED"}
             return start(self, context)
         job, session = self._begin(context)
         if job is None:

@@ -186,6 +186,8 @@ class TrackSession:
             self.writer.info["limb_recoveries"] = self.tracker.recoveries
         if self.tracker.gated:  # solutions whose root moved faster than a person can, searched again
             self.writer.info["root_gate"] = self.tracker.gated
+        if self.tracker.views_shared:  # views whose evidence was another tracked actor's (several actors)
+            self.writer.info["views_shared"] = {str(f): names for f, names in self.tracker.views_shared.items()}
         if self.tracker.views_left_out:  # the person outside a view's picture, or no person found there
             self.writer.info["views_left_out"] = {str(f): names for f, names in self.tracker.views_left_out.items()}
         self.writer.add(est, self.tracker.state())
@@ -295,14 +297,19 @@ class TrackSession:
             written["overlay"] = self.write_overlays()
         return written
 
+    def finished_poses(self):
+        """The take's poses, one per solved frame: smoothed and foot-locked when that ran, else as solved."""
+        solved = self.writer.estimates
+        smoothed = self.smoothed_poses
+        return smoothed if smoothed is not None and len(smoothed) == len(solved) else [e.pose for e in solved]
+
     def write_overlays(self):
         from ..core.results.overlay import OverlayWriter
 
         proxy = self.prepare().proxy
         writer = OverlayWriter(self.writer.out, self.capture.cameras, self.capture.frames.fps)
         solved = self.writer.estimates
-        smoothed = self.smoothed_poses
-        poses = smoothed if smoothed is not None and len(smoothed) == len(solved) else [e.pose for e in solved]
+        poses = self.finished_poses()
         try:
             for est, pose in zip(solved, poses):
                 verts = proxy.deform(self.body, pose[None])[0]

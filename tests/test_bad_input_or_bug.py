@@ -26,6 +26,7 @@ INPUT_ERRORS = [
     ("core.results.evaluation", "EvaluationError"), ("addon.scene_bridge", "SubjectError"),
     ("core.render", "BackendUnavailableError"), ("core.tracking.checkpoint", "CheckpointError"),
     ("operators.track", "TrackSetupError"), ("operators.export", "ExportError"),
+    ("operators.cast_session", "CastError"),
     ("operators.import_capture", "ClipLoadError"), ("core.batch.plan", "PlanError"),
     ("core.batch.chunk_folder", "ChunkError"), ("core.tracking.foot_contact", "FootContactError"),
     ("operators.track_batch", "BatchSetupError"), ("operators.track_batch", "ResultMismatchError"),

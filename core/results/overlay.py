@@ -15,6 +15,13 @@ def part_colours(n):
     return [tuple(int(255 * c) for c in colorsys.hsv_to_rgb(i / max(n, 1), 0.8, 1.0))[::-1] for i in range(n)]
 
 
+def actor_colours(n_actors, n_parts):
+    """Per actor, one colour for all its parts (BGR), lighter and darker by part so the limbs stay apart."""
+    hues = [(0.08 + i / max(n_actors, 1)) % 1.0 for i in range(n_actors)]
+    return [[tuple(int(255 * c) for c in colorsys.hsv_to_rgb(h, 0.85, 0.65 + 0.35 * (p % 3) / 2))[::-1]
+             for p in range(n_parts)] for h in hues]
+
+
 def draw_body(image, camera, vertices, faces, face_part, colours, alpha=0.45):
     """Painter's algorithm (far to near) with per-part colours, blended over `image` (BGR uint8)."""
     pts, order = triangles_far_to_near(camera, vertices, faces)
@@ -53,9 +60,17 @@ class OverlayWriter:
         self.writers = {}
 
     def add(self, images, vertices, faces, face_part, n_parts, label="", landmarks=None, visibility=None):
-        colours = part_colours(n_parts)
+        self.add_bodies(images, [(vertices, faces, face_part, part_colours(n_parts))], label, landmarks, visibility)
+
+    def add_bodies(self, images, bodies, label="", landmarks=None, visibility=None):
+        """One frame with several bodies, (vertices, faces, face_part, colour per part) each, the farthest from
+        each camera drawn first."""
         for c, cam in enumerate(self.cameras):
-            img = draw_body(images[cam.name], cam, vertices, faces, face_part, colours)
+            img = images[cam.name]
+            depth = [float(np.mean((cam.R @ np.asarray(b[0]).T)[2] + cam.t[2])) for b in bodies]
+            for i in np.argsort(depth)[::-1]:
+                vertices, faces, face_part, colours = bodies[i]
+                img = draw_body(img, cam, vertices, faces, face_part, colours)
             if landmarks is not None:
                 draw_landmarks(img, landmarks[c], visibility[c])
             if label:

@@ -5,6 +5,8 @@ is where); the local fit then gets closer to the energy's minimum than the parti
 """
 import numpy as np
 
+from .other_actors import OTHERS_MARGIN_PX
+
 # Low: a strong prior walks fitted limbs towards common poses (docs/defaults.md, "LOCAL_FIT_PRIOR_WEIGHT").
 LOCAL_FIT_PRIOR_WEIGHT = 0.25
 
@@ -18,9 +20,10 @@ class LocalFit:
         self.scale, self.refine_scale = scale, refine_scale
         self.iterations = iterations  # None: IcpSettings' own
 
-    def problem(self, observation, views_in_play, fine=False):
+    def problem(self, observation, views_in_play, fine=False, others=None):
         """The frame's IcpProblem: at the energy's resolution, or (fine) on the finer silhouettes. The views left
-        out this frame (`views_in_play` False) offer no contour."""
+        out this frame (`views_in_play` False) offer no contour; nor do other actors' bodies (`others`: an
+        OtherActors, core/tracking/other_actors.py)."""
         from ..optimizers.icp import IcpProblem
 
         scale = self.refine_scale if fine else self.scale
@@ -30,12 +33,17 @@ class LocalFit:
             silhouettes = [s if keep else np.zeros_like(s) for s, keep in zip(silhouettes, views_in_play)]
         energy = self.energy
         keypoints = energy.keypoints if observation.evidence is not None and energy.weights.keypoint else None
+        masks = None
+        if others:
+            shape = (len(cameras), max(c.height for c in cameras), max(c.width for c in cameras))
+            padded = others.masks(cameras, shape, margin_px=round(OTHERS_MARGIN_PX * scale / self.scale))
+            masks = [padded[c, :cam.height, :cam.width] for c, cam in enumerate(cameras)]
         return IcpProblem(body=self.body, proxy=self.proxy, cameras=cameras, silhouettes=list(silhouettes),
-                          to_absolute=self.root.to_absolute, prior=getattr(energy, "prior", None),
+                          others=masks, to_absolute=self.root.to_absolute, prior=getattr(energy, "prior", None),
                           keypoints=None if keypoints is None else keypoints.scaled(scale),
                           rig_points=energy.rig_points if keypoints is not None else None)
 
-    def fit(self, estimate, observation, views_in_play):
+    def fit(self, estimate, observation, views_in_play, others=None):
         """The local fit of `estimate` (relative) on the frame; returns the fitted relative pose."""
         from ..optimizers.icp import IcpSettings, IcpSolver
 
@@ -44,4 +52,5 @@ class LocalFit:
         if self.iterations is not None:
             settings = settings.with_iterations(self.iterations)
         settings = settings.at_resolution(self.refine_scale / self.scale) if fine else settings
-        return IcpSolver(self.problem(observation, views_in_play, fine), self.space, settings).fit(estimate).pose
+        problem = self.problem(observation, views_in_play, fine, others)
+        return IcpSolver(problem, self.space, settings).fit(estimate).pose

@@ -83,6 +83,8 @@ class Tracker:
         self.history = []  # relative poses of the solved frames (most recent last)
         self.next_guide = None  # (frame, absolute poses) the next frame's crops are placed around
         self.estimates = []
+        self.others = None  # the other tracked actors this frame (other_actors.OtherActors), or None
+        self.views_shared = {}  # {frame: [camera names]} whose evidence was another actor's
 
     def _optimizer_kwargs(self):
         s = self.settings
@@ -166,16 +168,41 @@ class Tracker:
         self.observation = observation if observation is not None else self.observer.observe(frame, guide_poses)
         feats = self.observation.features
         self.energy.set_frame(feats, self.evidence)
+        shared = self._set_apart_others(frame, guide_poses)
         predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
         targets = self.energy.targets
         self.views_in_play = views_in_play(
             self.capture.cameras, predicted, self.evidence, silhouette_area=targets.observed_count,
             person_area=self.energy.reference_area, picture_area=np.multiply(targets.widths, targets.heights))
+        if shared.any() and (self.views_in_play & ~shared).any():
+            self.views_in_play &= ~shared
         self.energy.set_view_weights(self.views_in_play.astype(np.float64))
         if not self.views_in_play.all():
             self.views_left_out[int(frame)] = [c.name for c, keep in zip(self.capture.cameras, self.views_in_play)
                                                if not keep]
         return feats
+
+    def set_others(self, others):
+        """The other tracked actors for the next frame solved (other_actors.OtherActors; None: alone)."""
+        self.others = others if others else None
+
+    def _set_apart_others(self, frame, guide_poses):
+        """Mark the other actors' bodies in the energy's targets and drop the landmarks that are theirs; returns
+        (C,) bool, the views whose evidence was another actor's (they are left out of the image terms)."""
+        from .other_actors import associate_landmarks
+
+        shared = np.zeros(len(self.capture.cameras), dtype=bool)
+        if self.others is None:
+            return shared
+        energy = self.energy
+        energy.targets = energy.targets.with_others(self.others.masks(energy.cameras, energy.targets.silhouette.shape))
+        if energy.keypoints is not None:
+            own = energy.project_rig_points(np.atleast_2d(guide_poses)[-1:])[0]
+            energy.keypoints, shared = associate_landmarks(
+                energy.keypoints, own, self.others.landmark_points(self.capture.cameras), energy.rig_points.swap)
+        if shared.any():
+            self.views_shared[int(frame)] = [c.name for c, s in zip(self.capture.cameras, shared) if s]
+        return shared
 
     def _plan_next(self, frame, guide, observe):
         """Place the next frame's crops around `guide` (absolute poses), and observe that frame in the worker
@@ -192,7 +219,7 @@ class Tracker:
     # ------------------------------------------------------------------ the local fit
     def fit_locally(self, estimate):
         """The local fit of a relative pose on the frame loaded last."""
-        return self.local_fit.fit(estimate, self.observation, self.views_in_play)
+        return self.local_fit.fit(estimate, self.observation, self.views_in_play, self.others)
 
     def _refine(self, estimate):
         """The local fit of the search's estimate; the kept particles move by the same step."""
@@ -253,7 +280,8 @@ class Tracker:
         if self.settings.observe_early:  # a short search leaves the worker too little time after it
             self._plan_next(upcoming, guide_before_search(self._last_absolute(2)), observe)
         if hasattr(self.optimizer, "set_frame_problem"):  # ICP works on correspondences, not a black box
-            self.optimizer.set_frame_problem(self.local_fit.problem(self.observation, self.views_in_play))
+            self.optimizer.set_frame_problem(self.local_fit.problem(self.observation, self.views_in_play,
+                                                                    others=self.others))
         result = self.optimizer.track_frame(self._energy_fn, list(self.history))
         estimate, energy, evaluations = result.estimate, result.energy, result.evaluations
         if not self.settings.observe_early:

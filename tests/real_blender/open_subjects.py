@@ -20,10 +20,11 @@ for path, label, n_bones in files:
     arms = [o for o in bpy.data.objects if o.type == "ARMATURE"]
     meshes = [o for o in bpy.data.objects if o.type == "MESH"]
     bones = len(arms[0].data.bones) if arms else 0
-    ok = (len(arms) == 1 and (bones == n_bones if n_bones else bones > 15) and len(meshes) == 1
-          and len(meshes[0].data.vertices) > 2000)
+    # one skinned body per armature (several in a scene with several actors)
+    ok = (len(arms) >= 1 and all((len(a.data.bones) == n_bones) if n_bones else len(a.data.bones) > 15 for a in arms)
+          and len(meshes) == len(arms) and all(len(m.data.vertices) > 2000 for m in meshes))
     failed += not ok
     print(f"STAGE {label}: {'opens' if ok else 'WRONG CONTENT'} in Blender "
           f"{bpy.app.version_string} (saved by {'.'.join(map(str, bpy.data.version))}): "
-          f"{bones} bones, {len(meshes[0].data.vertices) if meshes else 0} vertices")
+          f"{len(arms)} armature(s) of {bones} bones, {len(meshes[0].data.vertices) if meshes else 0} vertices")
 sys.exit(1 if failed else 0)

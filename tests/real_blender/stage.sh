@@ -211,6 +211,12 @@ diff <(cd "$out/command_result" && find . -type f | sort) <(cd "$out/module_resu
   > "$out/files.diff" || fail "--command and python -m wrote different files; see $out/files.diff"
 log "--command run wrote every result file: ${expected[*]} (the same set as python -m markerless_mocap track)"
 
+# 4b. several actors: the Track button with 'Track Every Armature' on the duet scene's two armatures
+run_in blender -b "$src/sample_scenes/duet/subject.blend" --python-exit-code 1 \
+  --python "$src/tests/real_blender/two_actors.py" -- "$src/sample_scenes/duet" /mnt/out/two_actors \
+  > "$out/two_actors.log" 2>&1 || fail "tracking two actors from the Track panel failed; see $out/two_actors.log"
+grep '^STAGE two' "$out/two_actors.log" | sed 's/^STAGE/[stage]/'
+
 # 5. the UI under Xvfb: Import, Check, Calibrate Actor (modal), Track (modal), Esc, Resume twice, Export, with screenshots
 start_xvfb
 log "UI on Xvfb :$display: Import, Check, Calibrate, Track (modal), Esc, Resume, Resume at 3 Hz, Export"

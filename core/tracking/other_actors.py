@@ -1,0 +1,92 @@
+"""The other tracked actors, as one actor's tracker sees them in a frame: where their bodies are in each view, and
+which of this frame's landmarks are theirs.
+
+Given the others' poses, the silhouette of all actors together does not depend on this actor's body where another
+body is (that pixel is a body pixel whoever is in front), so those pixels count for nothing in this actor's
+silhouette and edge terms (core/render/reference.py, OTHERS) and offer no contour to its local fit. A landmark the
+single-person model put nearer another actor's point than this actor's predicted one is not this actor's; a view
+whose landmarks mostly went to others is a view where the two cannot be told apart this frame, and counts for
+nothing in this actor's image terms that frame (docs/how-it-tracks.md, "Several actors").
+"""
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..evidence.keypoints import rig_keypoints
+from ..render import project_views, rasterize
+
+# The others' bodies are marked this many energy pixels wider than rendered: their estimate is a couple of
+# centimetres off, and a rim of theirs left unmarked would read as this actor's evidence [DESIGN].
+OTHERS_MARGIN_PX = 2
+# A view whose landmarks (by weight) are more than this share nearer another actor's is that actor's view [DESIGN].
+VIEW_TAKEN_SHARE = 0.5
+
+
+@dataclass
+class OtherActor:
+    body: object
+    proxy: object
+    pose: np.ndarray  # absolute pose this frame: solved, or predicted when not solved yet
+
+
+class OtherActors:
+    """The actors other than the one being solved, in one frame."""
+
+    def __init__(self, actors):
+        self.actors = list(actors)
+        self._vertices = [a.proxy.deform(a.body, np.atleast_2d(a.pose))[0] for a in self.actors]
+        self._masks = {}  # the same frame is asked for at the same resolution several times (search, local fits)
+
+    def __len__(self):
+        return len(self.actors)
+
+    def masks(self, cameras, shape, margin_px=OTHERS_MARGIN_PX):
+        """(C,H,W) bool: the union of the others' bodies in each of `cameras` (already at the wanted resolution),
+        widened by `margin_px`, in arrays of `shape` (the padded size of the energy's targets)."""
+        key = (tuple(shape), int(margin_px), tuple((c.width, c.height, float(c.K[0, 0])) for c in cameras))
+        if key in self._masks:
+            return self._masks[key]
+        out = np.zeros(shape, dtype=bool)
+        kernel = None if margin_px <= 0 else cv2.getStructuringElement(
+            cv2.MORPH_ELLIPSE, (2 * margin_px + 1, 2 * margin_px + 1))
+        for vertices, actor in zip(self._vertices, self.actors):
+            uv, z = project_views(vertices[None], cameras)
+            faces = np.asarray(actor.proxy.faces, dtype=np.int64)
+            labels = np.ones(len(faces), dtype=np.int16)
+            for c, cam in enumerate(cameras):
+                drawn = rasterize(uv[0, c], z[0, c], faces, labels, cam.width, cam.height) > 0
+                if kernel is not None:
+                    drawn = cv2.dilate(drawn.astype(np.uint8), kernel) > 0
+                out[c, :cam.height, :cam.width] |= drawn
+        self._masks[key] = out
+        return out
+
+    def landmark_points(self, cameras):
+        """(A,C,K,2) capture pixels of each other actor's landmark rig points."""
+        out = []
+        for actor in self.actors:
+            points = rig_keypoints(actor.body).world(actor.body, np.atleast_2d(actor.pose))[0]
+            out.append(np.stack([cam.project(points) for cam in cameras]))
+        return np.stack(out)
+
+
+def closer_to_others(landmarks, own, others, swap):
+    """(C,K) bool: landmarks (C,K,2) nearer one of the others' points (A,C,K,2) than this actor's (C,K,2); each
+    compared with the point it stands for and its mirror (single-view models swap sides)."""
+    def nearest(points):  # (..., C, K, 2) -> (..., C, K) distance to point k or its mirror
+        d = np.linalg.norm(points - landmarks, axis=-1)
+        return np.minimum(d, np.linalg.norm(points[..., swap, :] - landmarks, axis=-1))
+
+    return nearest(np.asarray(others)).min(axis=0) < nearest(np.asarray(own))
+
+
+def associate_landmarks(targets, own, others, swap, taken_share=VIEW_TAKEN_SHARE):
+    """KeypointTargets without the landmarks that are other actors', and (C,) bool: the views whose landmarks
+    mostly were (those lose all of theirs). `own`: (C,K,2) this actor's predicted points."""
+    theirs = closer_to_others(targets.uv, own, others, swap) & (targets.weight > 0)
+    total = targets.weight.sum(axis=1)
+    share = np.divide((targets.weight * theirs).sum(axis=1), total, out=np.zeros_like(total), where=total > 0)
+    taken = share > taken_share
+    weight = np.where(theirs | taken[:, None], 0.0, targets.weight)
+    return type(targets)(targets.uv, weight, targets.person_px, targets.alt_uv, targets.alt_cost), taken

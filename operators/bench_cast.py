@@ -1,0 +1,48 @@
+"""`bench --two-actors SCENE`: seconds per frame of two actors tracked together against one actor alone, on the
+scene's first frames (the first frame's whole-body search left out), the default settings."""
+import tempfile
+import time
+from pathlib import Path
+
+
+def _seconds_per_tracked_frame(session):
+    """Wall seconds of each solve_next after the first, averaged; the session is closed after."""
+    times = []
+    try:
+        while True:
+            t = time.perf_counter()
+            if session.solve_next() is None:
+                break
+            times.append(time.perf_counter() - t)
+    finally:
+        for s in getattr(session, "sessions", [session]):
+            if s.tracker is not None:
+                s.tracker.finish_prefetch()
+            s.capture.close()
+    return sum(times[1:]) / max(1, len(times) - 1)
+
+
+def cast_seconds(scene_dir, frames=3, seed=0):
+    """{"one_s_per_frame", "two_s_per_frame", "ratio", "frames", "armatures"} on `scene_dir` (its subject.blend
+    holds at least two armatures; the first two by name are timed)."""
+    import bpy
+
+    from ..core.tracking.settings import TrackingSettings
+    from .cast_session import CastError, CastSession
+    from .track_session import TrackSession
+
+    scene_dir = Path(scene_dir)
+    bpy.ops.wm.open_mainfile(filepath=str(scene_dir / "subject.blend"))
+    scene = bpy.context.scene
+    armatures = sorted((o for o in scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)[:2]
+    if len(armatures) < 2:
+        raise CastError(f"{scene_dir / 'subject.blend'} has fewer than two armatures: --two-actors needs a scene "
+                        "with two, such as sample_scenes/duet")
+    options = dict(frames=range(frames + 1), smooth_hz=0, foot_lock=False)
+    with tempfile.TemporaryDirectory() as tmp:
+        one = _seconds_per_tracked_frame(TrackSession(scene, armatures[0], scene_dir, Path(tmp) / "one",
+                                                      TrackingSettings(seed=seed), **options))
+        two = _seconds_per_tracked_frame(CastSession(scene, armatures, scene_dir, Path(tmp) / "two",
+                                                     settings=TrackingSettings(seed=seed), **options))
+    return {"one_s_per_frame": round(one, 3), "two_s_per_frame": round(two, 3), "ratio": round(two / one, 2),
+            "frames": frames, "armatures": [a.name for a in armatures]}

@@ -1,0 +1,219 @@
+"""Several actors: the silhouette statistics skip the pixels other actors cover (mutual occlusion), checked
+against a reference render of both bodies together."""
+import numpy as np
+import pytest
+
+from markerless_mocap.core import render
+from markerless_mocap.core.render import fast, reference
+
+from test_render import look_at, random_blob_targets, sphere_mesh
+
+
+def _two_bodies_scene():
+    verts, faces, labels = sphere_mesh(radius=0.35)
+    cams = [look_at("front", [0.0, -3.0, 0.2], [0, 0, 0], 90, 64, 48),
+            look_at("side", [3.0, 0.4, 0.1], [0, 0, 0], 80, 56, 48)]
+    a_true = verts + [0.15, 0.0, 0.0]
+    b_true = verts * [1.0, 1.0, 1.4] + [-0.25, -0.6, 0.05]  # in front of A in "front", beside it in "side"
+    return verts, faces, labels, cams, a_true, b_true
+
+
+def _render(meshes, faces, labels, cam):
+    """The reference rasteriser on several meshes at once (one depth test): their joint label image."""
+    verts = np.concatenate(meshes)
+    all_faces = np.concatenate([faces + i * len(meshes[0]) for i in range(len(meshes))])
+    uv, z = render.project_views(verts[None], [cam])
+    return reference.rasterize(uv[0, 0], z[0, 0], all_faces, np.tile(labels, len(meshes)), cam.width, cam.height)
+
+
+def _targets(observed, cams):
+    zeros = np.zeros(observed.shape)
+    return render.FrameTargets([c.width for c in cams], [c.height for c in cams], observed.astype(np.uint8), zeros,
+                               np.ones(observed.shape, np.uint8), zeros, np.zeros(observed.shape + (2,), np.uint8))
+
+
+@pytest.mark.parametrize("backend", ["numpy", "fast"])
+def test_silhouette_xor_with_another_actor_equals_the_joint_render_minus_a_constant(backend):
+    # Binary XOR of both bodies rendered together against the image, as a function of A's pose, is A's XOR outside
+    # B's pixels plus a constant: what the statistics compute when B's pixels are marked OTHERS.
+    verts, faces, labels, cams, a_true, b_true = _two_bodies_scene()
+    H, W = 48, 64
+    observed = np.zeros((2, H, W), bool)
+    b_mask = np.zeros((2, H, W), bool)
+    for c, cam in enumerate(cams):
+        observed[c, :cam.height, :cam.width] = _render([a_true, b_true], faces, labels, cam) > 0
+        b_mask[c, :cam.height, :cam.width] = _render([b_true], faces, labels, cam) > 0
+    assert (observed & b_mask).sum() < observed.sum()  # A shows somewhere
+    targets = _targets(observed, cams).with_others(b_mask)
+    assert targets.has_others and np.array_equal(targets.observed_count, (observed & ~b_mask).sum(axis=(1, 2)))
+    rng = np.random.default_rng(5)
+    candidates = [a_true] + [a_true + rng.normal(0, 0.12, 3) for _ in range(6)] + [a_true + [-0.4, -0.6, 0.0]]
+    uv, z = render.project_views(np.array(candidates), cams)
+    stats, _ = render.statistics(uv, z, faces, labels, targets, need_chamfer=False, backend=backend)
+    xor = stats[..., render.TEMPLATE] + targets.observed_count[None] - 2 * stats[..., render.OVERLAP]
+    for p, cand in enumerate(candidates):
+        for c, cam in enumerate(cams):
+            joint = _render([cand, b_true], faces, labels, cam) > 0
+            obs = observed[c, :cam.height, :cam.width]
+            constant = (b_mask[c, :cam.height, :cam.width] & ~obs).sum()
+            assert xor[p, c] == (joint ^ obs).sum() - constant
+    assert np.all(xor[0] == 0)  # the true pose explains the image exactly: the crossing costs it nothing
+    # without the other actor marked, the same true pose pays for B's pixels
+    plain, _ = render.statistics(uv[:1], z[:1], faces, labels, _targets(observed, cams), need_chamfer=False,
+                                 backend=backend)
+    assert np.all(plain[0, :, render.TEMPLATE] + observed.sum(axis=(1, 2)) - 2 * plain[0, :, render.OVERLAP] > 0)
+
+
+def test_fast_path_equals_reference_with_other_actors_pixels():
+    verts, faces, labels = sphere_mesh()
+    rng = np.random.default_rng(11)
+    cams = [look_at("a", [2.5, 0.3, 0.4], [0, 0, 0], 120, 64, 48),
+            look_at("b", [-0.5, 2.2, -0.3], [0, 0, 0], 90, 40, 56)]
+    targets = random_blob_targets(cams, rng)
+    others = np.zeros(targets.silhouette.shape, bool)
+    others[0, 10:30, 20:50] = True
+    others[1, 25:56, 0:18] = True
+    marked = targets.with_others(others)
+    poses = [verts @ np.linalg.qr(rng.normal(size=(3, 3)))[0].T * rng.uniform(0.7, 1.5) + rng.normal(0, 0.3, 3)
+             for _ in range(10)]
+    uv, z = render.project_views(np.array(poses), cams)
+    s_ref, h_ref = reference.statistics(uv, z, faces, labels, marked, True, 3, 0)
+    s_fast, h_fast = fast.statistics(uv, z, faces, labels, marked, True, 3, 0)
+    assert np.allclose(s_ref, s_fast, rtol=1e-12, atol=1e-9)
+    assert np.array_equal(h_ref, h_fast)
+    s_plain, _ = reference.statistics(uv, z, faces, labels, targets, True, 3, 0)
+    assert np.all(s_ref[..., render.TEMPLATE] <= s_plain[..., render.TEMPLATE])
+    assert np.any(s_ref[..., render.TEMPLATE] < s_plain[..., render.TEMPLATE])  # the marked pixels were skipped
+    assert np.all(marked.edge_off[others] == 0)
+    with pytest.raises(render.RenderInputError, match="other actors"):
+        targets.with_others(others[:1])
+
+
+# ------------------------------------------------------------------------------------------ landmarks of another
+def test_another_actors_landmarks_in_one_view_do_not_move_the_fit():
+    """The single-person landmark model put the other actor's landmarks in view 0 (the crop shared by both) and one
+    wrist of view 1 on the other's: set apart, the fit equals the fit on the clean landmarks alone; kept, it moves."""
+    pytest.importorskip("bpy")
+    from scene_helpers import ground_truth_poses, mean_joint_error, scene_dir
+
+    from markerless_mocap.core.capture.capture import load_capture
+    from markerless_mocap.core.evidence.keypoint_fit import pose_from_keypoints
+    from markerless_mocap.core.evidence.keypoints import KeypointTargets, rig_keypoints
+    from markerless_mocap.core.evidence.learned import CROP_MARGIN
+    from markerless_mocap.core.tracking.other_actors import associate_landmarks
+
+    body, _, poses, _ = ground_truth_poses("walk")
+    cameras = load_capture(scene_dir("walk")).cameras
+    rig = rig_keypoints(body)
+    truth, predicted = poses[30], poses[29]  # the actor, and where its tracker expects it
+    other = poses[12].copy()
+    other[body.translation_dofs[:2]] = truth[body.translation_dofs[:2]] + [0.45, 0.25]  # another person close by
+
+    def points(pose):
+        world = rig.world(body, pose[None])[0]
+        return np.stack([cam.project(world) for cam in cameras])
+
+    uv = points(truth)
+    theirs = points(other)
+    uv[0] = theirs[0]
+    wrist = int(np.nonzero(rig.landmarks == 15)[0][0])  # the left wrist's rig point
+    uv[1, wrist] = theirs[1, wrist]
+    n = len(rig.landmarks)
+    targets = KeypointTargets(uv, np.full((len(cameras), n), 0.95), np.full(len(cameras), 200.0 / CROP_MARGIN))
+    clean = KeypointTargets(points(truth), targets.weight.copy(), targets.person_px)
+    clean.weight[0] = 0.0
+    clean.weight[1, wrist] = 0.0
+
+    kept, taken = associate_landmarks(targets, points(predicted), theirs[None], rig.swap)
+    assert taken.tolist() == [True] + [False] * (len(cameras) - 1)
+    assert np.array_equal(kept.weight, clean.weight)
+    start = predicted.copy()
+    fit_kept = pose_from_keypoints(body, cameras, kept, rig, start)[0]
+    fit_clean = pose_from_keypoints(body, cameras, clean, rig, start)[0]
+    fit_all = pose_from_keypoints(body, cameras, targets, rig, start)[0]
+    assert mean_joint_error(body, fit_kept, fit_clean) < 1e-6
+    assert mean_joint_error(body, fit_kept, truth) < 0.02
+    assert mean_joint_error(body, fit_all, truth) > 2 * mean_joint_error(body, fit_kept, truth) + 0.01
+
+
+# ------------------------------------------------------------------------------------------ the command line
+def test_track_with_two_armatures_keys_each_on_its_own_person(tmp_path, capsys):
+    """`track --armature Lead --armature Partner` on the duet's first frames: one result folder per actor, each
+    actor's hips on its own person (not the other's), OUT/report.json listing both."""
+    pytest.importorskip("bpy")
+    import json
+
+    from scene_helpers import scene_dir
+
+    from markerless_mocap.core.results.result_folder import load_joints
+    from markerless_mocap.operators.cli import main
+
+    duet = scene_dir("duet")
+    out = tmp_path / "out"
+    code = main(["track", "--scene", str(duet / "subject.blend"), "--capture", str(duet), "--out", str(out),
+                 "--frames", "0-2", "--armature", "Lead", "--armature", "Partner", "--no-overlays", "--no-export",
+                 "--seed", "0"])
+    assert code == 0, capsys.readouterr().err
+    report = json.loads((out / "report.json").read_text())
+    assert [a["armature"] for a in report["actors"]] == ["Lead", "Partner"]
+    assert all(a["frames_solved"] == 3 for a in report["actors"])
+    truths = {name: load_joints(duet / f"gt_joints_{name}.npz") for name in ("Lead", "Partner")}
+    for name, other in (("Lead", "Partner"), ("Partner", "Lead")):
+        names, frames, solved = load_joints(out / "actors" / name / "joints.npz")
+        assert list(frames) == [0, 1, 2]
+        hips = solved[:, list(names).index("Hips")]
+        own = truths[name][2][:3, list(truths[name][0]).index("Hips")]
+        theirs = truths[other][2][:3, list(truths[other][0]).index("Hips")]
+        assert np.linalg.norm(hips - own, axis=1).max() < 0.1
+        assert np.all(np.linalg.norm(hips - theirs, axis=1) > 0.3)
+
+
+def test_several_actors_refuse_a_calibration_and_names_that_share_a_folder(tmp_path, capsys):
+    pytest.importorskip("bpy")
+    from scene_helpers import scene_dir
+
+    from markerless_mocap.operators.cast_session import actor_folder_name
+    from markerless_mocap.operators.cli import main
+
+    duet = scene_dir("duet")
+    code = main(["track", "--scene", str(duet / "subject.blend"), "--capture", str(duet), "--out",
+                 str(tmp_path / "o"), "--frames", "0-2", "--armature", "Lead", "--armature", "Partner", "--calibrate"])
+    assert code == 2
+    assert "--calibrate and --actor track one actor" in capsys.readouterr().err
+    assert not (tmp_path / "o" / "actors").exists()
+    assert actor_folder_name("Lead/1") == actor_folder_name("Lead:1") == "Lead_1"
+    assert actor_folder_name("..") == "armature"
+
+
+# ------------------------------------------------------------------------------------------ the Track panel
+@pytest.mark.bpy
+def test_track_panel_with_every_armature_keys_both(addon_module_name, bpy_module, tmp_path):
+    """Subject panel: 'Track Every Armature' with two armatures in the scene; Track keys both, each on its own
+    person, writes actors/<armature>/ and one tracked.blend; a cluster run is refused with the fix."""
+    from scene_helpers import scene_dir
+    from test_addon_ui import _draw_all, _labels
+
+    bpy = bpy_module
+    duet = scene_dir("duet")
+    bpy.ops.wm.open_mainfile(filepath=str(duet / "subject.blend"))
+    m = bpy.context.scene.mocap
+    text = " ".join(_labels(_draw_all(bpy, panels=("MOCAP_PT_subject",))))
+    assert "pick the one to track" in text
+    m.every_armature = True
+    text = " ".join(_labels(_draw_all(bpy, panels=("MOCAP_PT_subject",))))
+    assert "Tracks 2 actors at once: Lead, Partner" in text and "pick the one" not in text
+    m.capture_dir = str(duet)
+    m.output_dir = str(tmp_path / "out")
+    m.use_frame_range, m.frame_start, m.frame_end = True, 0, 1
+    m.preset = "preview"
+    m.run_on = "local"
+    with pytest.raises(RuntimeError, match="Several actors run on this Blender only"):
+        bpy.ops.mocap.track()
+    m.run_on = "this"
+    assert bpy.ops.mocap.track() == {"FINISHED"}, m.last_error
+    for name in ("Lead", "Partner"):
+        arm = bpy.context.scene.objects[name]
+        assert arm.animation_data is not None and arm.animation_data.action is not None  # keyed
+        assert (tmp_path / "out" / "actors" / name / "joints.npz").is_file()
+    assert (tmp_path / "out" / "tracked.blend").is_file()
+    assert (tmp_path / "out" / "overlay" / "cam1.mp4").is_file()
