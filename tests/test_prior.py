@@ -136,3 +136,58 @@ def test_from_motion_maps_frames_spread_over_every_clip(monkeypatch):
     assert all(len(s) == 40 for s in prior.samples.values())
     # Samples come from both clips (the second clip's poses are offset by 10).
     assert (prior.samples["lower"] > 5).any() and (prior.samples["lower"] < 5).any()
+
+
+def test_beyond_the_joint_limits_is_impossible_within_them_nothing_changes(tmp_path):
+    lower, upper = np.full(7, -np.inf), np.full(7, np.inf)
+    lower[6], upper[6] = -0.2, 2.5  # DOF 6 a knee: straight at -0.2, fully bent at 2.5
+    plain = AnatomicalPrior.fit(_training(), GROUPS, n_samples=100, seed=1)
+    bounded = AnatomicalPrior.fit(_training(), GROUPS, n_samples=100, seed=1).bounded_by(lower, upper)
+    inside = np.random.default_rng(3).normal(0, 0.3, (5, 7)) + np.sin(np.arange(7))
+    inside[:, 6] = np.clip(inside[:, 6], -0.2, 2.5)
+    assert np.array_equal(bounded.energy(inside), plain.energy(inside))
+    assert np.array_equal(bounded.gradient(inside), plain.gradient(inside))
+    past = inside.copy()
+    past[:, 6] = -0.2 - np.deg2rad(10)  # hyper-extended by 10 degrees
+    assert np.all(bounded.energy(past) > plain.energy(past) + 500)
+    eps, x = 1e-6, past[:1]
+    fd = (bounded.energy(x + [0, 0, 0, 0, 0, 0, eps]) - bounded.energy(x - [0, 0, 0, 0, 0, 0, eps])) / (2 * eps)
+    assert bounded.gradient(x)[0, 6] == pytest.approx(fd[0], rel=1e-5)
+    path = tmp_path / "prior.npz"
+    bounded.save(path)
+    assert np.array_equal(AnatomicalPrior.load(path).energy(past), bounded.energy(past))
+    with pytest.raises(PriorError, match="7 lower and upper"):
+        plain.bounded_by(lower[:6], upper[:6])
+
+
+def test_an_unseen_possible_pose_is_possible_a_hyperextended_knee_is_not():
+    """The product's prior (walking and jumping clips, mapped on the walk subject): sitting on a chair and both
+    arms straight up are far from every training pose, yet cost no more than the floor does anywhere; a knee bent
+    20 degrees backwards costs hundreds of times more."""
+    pytest.importorskip("bpy")
+    from scene_helpers import ground_truth_poses, scene_dir
+
+    from markerless_mocap.core.tracking.motion_library import build_motion_models, scene_exclusion
+
+    body, _, poses, _ = ground_truth_poses("walk")
+    prior, _ = build_motion_models(body, exclude=scene_exclusion(scene_dir("walk")))
+    dof = {n: i for i, n in enumerate(body.dof_names)}
+    walking = poses[30]
+    sitting = walking.copy()
+    for side in ("l", "r"):
+        sitting[dof[f"{side}_hip.flex"]], sitting[dof[f"{side}_knee.flex"]] = 1.55, 1.6
+    arms_up = walking.copy()
+    for side in ("l", "r"):
+        arms_up[dof[f"{side}_shoulder.flex"]], arms_up[dof[f"{side}_elbow.flex"]] = 2.9, 0.0
+    for pose in (sitting, arms_up):
+        assert np.all((pose >= body.lower) & (pose <= body.upper))  # possible: within every joint's limits
+    far = np.full((1, body.n_dof), 0.0)
+    far[0, 6:] = np.where(np.isfinite(body.upper[6:]), body.upper[6:], 0.0)  # every joint at its upper limit
+    ceiling = float(prior.energy(far)[0])  # the floor's cost: as far from the data as the limits allow
+    for pose in (sitting, arms_up):
+        e = float(prior.energy(pose[None])[0])
+        print(f"prior: walking {float(prior.energy(walking[None])[0]):.2f}, this pose {e:.2f}, floor {ceiling:.2f}")
+        assert np.isfinite(e) and e <= ceiling + 1e-9
+    knee_back = walking.copy()
+    knee_back[dof["l_knee.flex"]] = body.lower[dof["l_knee.flex"]] - np.deg2rad(20)
+    assert prior.energy(knee_back[None])[0] > 100 * max(1.0, abs(ceiling))

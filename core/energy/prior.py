@@ -21,6 +21,14 @@ from pathlib import Path
 import numpy as np
 
 
+# Beyond the rig's joint limits a pose is not a person's, however the density is floored: each radian past a limit
+# costs (excess / LIMIT_SOFTNESS)^2 x OUTSIDE_LIMIT_COST [DESIGN]. The search and the local fit keep to the limits,
+# so this never changes a tracked pose; it makes the prior itself say "impossible" (10 degrees past: about 600,
+# against the floored density's few units).
+OUTSIDE_LIMIT_COST = 50.0
+LIMIT_SOFTNESS = 0.05  # rad
+
+
 class PriorError(ValueError):
     """Training samples or a saved prior are unusable."""
 
@@ -46,6 +54,7 @@ class AnatomicalPrior:
         """groups {name: DOF indices}; samples {name: (L,d)}; bandwidths {name: h}; n_dof = D of the poses;
         floor_sigmas: kernel-sum floor in bandwidths (see the module docstring), None for none."""
         self.floor_sigmas = None if floor_sigmas is None else float(floor_sigmas)
+        self.limits = None  # (lower, upper) per DOF once bounded_by: the rig's joint limits
         self.groups = {g: np.asarray(idx, dtype=np.int64) for g, idx in groups.items()}
         self.samples = {g: np.asarray(samples[g], dtype=np.float64) for g in self.groups}
         self._sample_norms = {g: np.sum(y * y, axis=1) for g, y in self.samples.items()}
@@ -130,10 +139,27 @@ class AnatomicalPrior:
             return kernel_log_sum
         return np.maximum(kernel_log_sum, -0.5 * self.floor_sigmas ** 2)
 
+    def bounded_by(self, lower, upper):
+        """This prior with the rig's joint limits (D,) each: a pose beyond them costs OUTSIDE_LIMIT_COST per
+        (excess / LIMIT_SOFTNESS)^2. Returns self."""
+        lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+        if lower.shape != (self.n_dof,) or upper.shape != (self.n_dof,) or np.any(lower > upper):
+            raise PriorError(f"joint limits must be {self.n_dof} lower and upper values, lower <= upper")
+        self.limits = (lower, upper)
+        return self
+
+    def _excess(self, x):
+        """(P,D) signed radians past the limits (0 within them)."""
+        if self.limits is None:
+            return np.zeros_like(x)
+        lower, upper = self.limits
+        return np.where(x < lower, x - lower, np.where(x > upper, x - upper, 0.0))
+
     def energy(self, poses):
-        """V_anat = -(1/G) sum_g log p_g(x), (P,)."""
+        """V_anat = -(1/G) sum_g log p_g(x), (P,), plus the cost of any joint past its limit."""
         x = self._check(poses)
-        return -sum(self.log_density(x, g) for g in self.groups) / len(self.groups)
+        density = -sum(self.log_density(x, g) for g in self.groups) / len(self.groups)
+        return density + OUTSIDE_LIMIT_COST * np.sum((self._excess(x) / LIMIT_SOFTNESS) ** 2, axis=1)
 
     def gradient(self, poses):
         """dV_anat/dx (P,D): per group (x - weighted mean of the samples) / h^2 / G (mean-shift form)."""
@@ -145,12 +171,14 @@ class AnatomicalPrior:
             w /= w.sum(axis=1, keepdims=True)
             active = (self._floored(_logsumexp(a, axis=1)) == _logsumexp(a, axis=1))[:, None]  # flat where floored
             grad[:, idx] += np.where(active, (x[:, idx] - w @ y) / (h * h), 0.0)
-        return grad / len(self.groups)
+        return grad / len(self.groups) + 2.0 * OUTSIDE_LIMIT_COST * self._excess(x) / LIMIT_SOFTNESS ** 2
 
     # ---- persistence -----------------------------------------------------------------------------
     def save(self, path):
         data = {"group_names": np.array(list(self.groups)), "n_dof": np.array(self.n_dof),
                 "floor_sigmas": np.array(np.nan if self.floor_sigmas is None else self.floor_sigmas)}
+        if self.limits is not None:
+            data["lower"], data["upper"] = self.limits
         for i, g in enumerate(self.groups):
             data[f"indices_{i}"] = self.groups[g]
             data[f"samples_{i}"] = self.samples[g]
@@ -171,6 +199,8 @@ class AnatomicalPrior:
                 bw = {g: float(f[f"bandwidth_{i}"]) for i, g in enumerate(names)}
                 n_dof = int(f["n_dof"])
                 floor = float(f["floor_sigmas"]) if "floor_sigmas" in f.files else np.nan
+                limits = (f["lower"], f["upper"]) if "lower" in f.files else None
         except (KeyError, ValueError, OSError) as exc:
             raise PriorError(f"{path} is not a saved anatomical prior ({exc}); re-train and save it") from exc
-        return cls(groups, samples, bw, n_dof, None if np.isnan(floor) else floor)
+        prior = cls(groups, samples, bw, n_dof, None if np.isnan(floor) else floor)
+        return prior if limits is None else prior.bounded_by(*limits)

@@ -124,4 +124,5 @@ def build_motion_models(body, fps=30.0, exclude=None, seed=0, n_samples=200, pro
                                    progress=lambda f, text: report(0.9 * f, text))
     report(0.9, "fitting the anatomical prior and the dynamics")
     prior = AnatomicalPrior.fit(np.concatenate(sequences), body.prior_groups, n_samples=n_samples, seed=seed)
+    prior.bounded_by(body.lower, body.upper)
     return prior, fit_dynamics(body, sequences)
