@@ -27,6 +27,7 @@ from ..core.tracking.options import CHOICE_NAMES
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
 from .cmd_track import add_foot_lock_options, add_tracking_options
+from .failures import EXIT_INPUT as EXIT_USER_ERROR
 
 EXIT_SOME_FAILED = 1
 EXIT_CANCELLED = 130
@@ -196,6 +197,7 @@ class TakeRun:
     def __init__(self, take, plan, folders, seeds):
         self.take, self.plan, self.folders, self.seeds = take, plan, folders, seeds
         self.futures = {}  # chunk index -> future
+        self.attempts = {}  # chunk index -> runs that ended with a failure that is not the user's
         self.seed_future = None  # the seed pass (core/batch/seed.py), before the chunks after the first
         self.state = "queued"
         self.error = None
@@ -284,7 +286,9 @@ class Batch:
     def _submit_chunks(self, runner, run, first_only=False):
         for chunk, folder in zip(run.plan, run.folders):
             if not folder.done and chunk.index not in run.futures and (chunk.index == 0 or not first_only):
-                run.futures[chunk.index] = runner.submit(f"{run.take.name}-{chunk.name}", self.chunk_argv(run, chunk))
+                # exit codes read here (_poll_chunks): a user's error is not worth running again, a crash is
+                run.futures[chunk.index] = runner.submit(f"{run.take.name}-{chunk.name}", self.chunk_argv(run, chunk),
+                                                         check=False)
 
     def run(self, runner):
         for run in self.runs:
@@ -299,7 +303,7 @@ class Batch:
                 return EXIT_CANCELLED
             for run in self.runs:
                 self._poll_seeds(runner, run)
-                self._poll_chunks(run)
+                self._poll_chunks(runner, run)
             self._poll_stitches()
             self.report()
             if all(r.state in ("done", "failed") for r in self.runs):
@@ -341,7 +345,7 @@ class Batch:
             reason = f"{type(exc).__name__}: {exc}"
         run.fail(f"seed pass: {reason}")
 
-    def _poll_chunks(self, run):
+    def _poll_chunks(self, runner, run):
         from ..core.batch.cluster import failure_text
 
         for index, future in list(run.futures.items()):
@@ -350,6 +354,21 @@ class Batch:
                 status = "finished"
             if status == "finished":
                 del run.futures[index]
+                ended = future.result(timeout=5) if future.status == "finished" else None
+                code = getattr(ended, "returncode", 0)
+                if code == EXIT_USER_ERROR:  # the footage, the rig, the settings: the same again would fail
+                    run.fail(f"chunk {run.plan[index].name}: {failure_text(ended)}")
+                    return
+                if code != 0:
+                    run.attempts[index] = run.attempts.get(index, 0) + 1
+                    if run.attempts[index] > runner.retries:
+                        run.fail(f"chunk {run.plan[index].name}: {failure_text(ended)} (after {run.attempts[index]} "
+                                 "runs)")
+                        return
+                    chunk = run.plan[index]
+                    run.futures[index] = runner.submit(f"{run.take.name}-{chunk.name}", self.chunk_argv(run, chunk),
+                                                       check=False)
+                    continue
                 if not run.folders[index].done:
                     run.fail(f"chunk {run.plan[index].name}: its command ended without writing "
                              f"{run.folders[index].path} (is the chunk folder on storage the workers share?)")

@@ -99,3 +99,27 @@ def test_the_panel_api_starts_a_batch_in_the_background_and_reads_its_end(tmp_pa
     assert progress["state"] == "failed" and "take 'lost': capture" in progress["error"]
     assert "take 'lost'" in (tmp_path / "out" / "batch.log").read_text()
     assert time.time() - progress["updated"] < 120
+
+
+@pytest.mark.parametrize("exit_code, runs", [(2, 1), (3, 2)])
+def test_a_chunk_that_fails_for_the_users_reason_is_not_run_again(bpy_module, tmp_path, capsys, monkeypatch,
+                                                                     exit_code, runs):
+    """A chunk command that exits 2 (the footage, the rig, the settings: the same again would fail) fails its take
+    at once with its own message; any other failure (a crash) is run again, up to --retries more times."""
+    import sys
+
+    from markerless_mocap.operators import cmd_batch
+    from markerless_mocap.operators.cli import main
+
+    counter = tmp_path / "runs.txt"
+    script = (f"import sys; open({str(counter)!r}, 'a').write('run\\n'); "
+              "print('markerless_mocap track-chunk: frame 3 of camera cam2 cannot be read', file=sys.stderr); "
+              f"sys.exit({exit_code})")
+    monkeypatch.setattr(cmd_batch.Batch, "chunk_argv", lambda self, run, chunk: [sys.executable, "-c", script])
+    path = _toml(tmp_path, _take("short", frames="0-5"))
+    code = main(["batch", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--retries", "1",
+                 "--no-overlays", "--no-export"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "take 'short': chunk" in err and "frame 3 of camera cam2 cannot be read" in err
+    assert counter.read_text().count("run") == runs

@@ -3,9 +3,10 @@
 Each task is the standard library's `subprocess.run` of a chunk's command line
 (docs/batch.md, "Why a subprocess per chunk"): the scheduler unpickles only a call it already knows (never this
 package), the worker's own thread stays free to answer the scheduler's heartbeats however long the chunk tracks,
-and the chunk's process holds the numba functions, the landmark network and the footage. A task that ends with a
-non-zero exit code raises, so Dask runs it again up to `retries` times; a worker that dies is Dask's to notice, and
-its task runs on another worker.
+and the chunk's process holds the numba functions, the landmark network and the footage. A chunk's exit code comes
+back as the task's result, for the batch to tell the user's error from a crash (operators/cmd_batch.py); a command
+submitted with `check` raises instead and Dask runs it again up to `retries` times. A worker that dies is Dask's to
+notice, and its task runs on another worker.
 """
 from __future__ import annotations
 
@@ -79,11 +80,13 @@ class ChunkRunner:
             self.cluster.close()
         self.client = self.cluster = None
 
-    def submit(self, name, argv):
-        """Run `argv` on a worker; returns the future (its result the CompletedProcess)."""
-        return self.client.submit(subprocess.run, list(map(str, argv)), check=True, capture_output=True, text=True,
+    def submit(self, name, argv, check=True):
+        """Run `argv` on a worker; returns the future (its result the CompletedProcess). With `check` a non-zero
+        exit raises and Dask runs the command again up to `retries` times; without, the caller reads the exit code
+        and decides (a user's error is not run again)."""
+        return self.client.submit(subprocess.run, list(map(str, argv)), check=check, capture_output=True, text=True,
                                   env=self.env, key=f"{name}-{uuid.uuid4().hex[:8]}", pure=False,
-                                  retries=self.retries)
+                                  retries=self.retries if check else 0)
 
 
 __all__ = ["ChunkRunner", "THREAD_VARIABLES", "chunk_environment", "default_workers", "failure_text"]
