@@ -177,7 +177,6 @@ def load_actor_option(args, scene, armature, backend=None):
 def run(args):
     from ..addon.scene_bridge import find_armature
     from ..core.render import BackendUnavailableError
-    from ..core.results.result_folder import ResultWriteError
     from .backend_choice import choose_backend
     from .failures import USER_ERRORS, cli_failure
     from .track_session import TrackSession
@@ -205,10 +204,26 @@ def run(args):
     session.writer.info["backend"] = choice.to_dict()  # report.json: what was asked for, what ran, why
     if args.resume:
         session.key_all()
+    code = solve_all(session, args.out)
+    if code is not None:
+        return code
+    if choice.used == "gpu":  # its private render scene must not be saved in tracked.blend
+        from ..addon import gpu_likelihood
+        gpu_likelihood.release()
+    finish_and_list(session, args, f"tracked {session.n_done} frames")
+    return 0
+
+
+def solve_all(session, out):
+    """run_session with the command line's endings: None once every frame is solved, else the exit code, said
+    with where the frames solved so far are kept (a TrackSession or a CastSession)."""
+    from ..core.results.result_folder import ResultWriteError
+    from .failures import cli_failure
+
     try:
         run_session(session)
     except KeyboardInterrupt:
-        print(f"interrupted: {session.n_done} frames solved and saved in {args.out} (use --resume to continue)",
+        print(f"interrupted: {session.n_done} frames solved and saved in {out} (use --resume to continue)",
               file=sys.stderr)
         return 130
     except ResultWriteError as exc:
@@ -216,13 +231,9 @@ def run(args):
         return 1
     except Exception as exc:  # noqa: BLE001  (a frame's footage the user must fix, or a bug: said which)
         code = cli_failure("track", exc)
-        print(f"{session.n_done} frames solved and saved in {args.out} (use --resume to continue)", file=sys.stderr)
+        print(f"{session.n_done} frames solved and saved in {out} (use --resume to continue)", file=sys.stderr)
         return code
-    if choice.used == "gpu":  # its private render scene must not be saved in tracked.blend
-        from ..addon import gpu_likelihood
-        gpu_likelihood.release()
-    finish_and_list(session, args, f"tracked {session.n_done} frames")
-    return 0
+    return None
 
 
 def run_cast(args, scene, names, choice):
@@ -248,15 +259,8 @@ def run_cast(args, scene, names, choice):
         session.writer.info["backend"] = choice.to_dict()
     if args.resume:
         cast.key_all()
-    try:
-        run_session(cast)
-    except KeyboardInterrupt:
-        print(f"interrupted: {cast.n_done} frames solved and saved in {args.out} (use --resume to continue)",
-              file=sys.stderr)
-        return 130
-    except Exception as exc:  # noqa: BLE001  (a frame's footage the user must fix, or a bug: said which)
-        code = cli_failure("track", exc)
-        print(f"{cast.n_done} frames solved and saved in {args.out} (use --resume to continue)", file=sys.stderr)
+    code = solve_all(cast, args.out)
+    if code is not None:
         return code
     written = cast.finish(export=not args.no_export, overlays=not args.no_overlays, save_blend=not args.no_export)
     print(f"tracked {cast.n_done} frames of {len(armatures)} actors -> {args.out}", file=sys.stderr)
