@@ -348,8 +348,9 @@ class MOCAP_OT_track(bpy.types.Operator):
             done = (f"Smoothed again at {props.smoothing_hz:g} Hz" if smoothed else "Rewritten as solved, unsmoothed")
             report = f"{done}: all {job._done_before} frames were already tracked; results in {props.last_output}"
         else:
-            props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame{smoothed}"
-            report = f"Tracked {solved} frames{smoothed}; results in {props.last_output}"
+            locked = ", feet locked" if summary and "joints_unpinned" in summary else ""
+            props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame{smoothed}{locked}"
+            report = f"Tracked {solved} frames{smoothed}{locked}; results in {props.last_output}"
         self.report({"INFO"}, report)
         return {"FINISHED"}
 

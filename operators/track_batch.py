@@ -166,7 +166,8 @@ def start(operator, context):
             workers=(props.local_workers or None) if props.run_on == "local" else None,
             scheduler=props.scheduler_address.strip() if props.run_on == "cluster" else None,
             chunk_frames=props.chunk_frames, command=worker_command(), settings=tracking_choices(props),
-            extra_args=["--smooth", f"{props.smoothing_hz:g}", *_cluster_args(props)])
+            extra_args=["--smooth", f"{props.smoothing_hz:g}", "--foot-lock" if props.foot_lock else "--no-foot-lock",
+                        "--foot-lock-speed", f"{props.foot_lock_speed:g}", *_cluster_args(props)])
     except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
         props.last_error = user_message(exc, "Sending the take")
         operator.report({"ERROR"}, props.last_error)

@@ -761,6 +761,7 @@ def test_a_folder_sent_to_a_cluster_sends_each_capture_with_the_panels_settings(
     m.run_on, m.scheduler_address, m.worker_command = "cluster", " tcp://10.0.0.5:8786 ", "/opt/b/blender -b"
     m.batch_scope, m.batch_folder, m.chunk_frames = "folder", str(captures), 450
     m.preset, m.seed, m.refine, m.smoothing_hz = "preview", 3, False, 6.5
+    m.foot_lock, m.foot_lock_speed = False, 0.3
     cmd_batch = _module(addon_module_name, "operators.cmd_batch")
     track_batch = _module(addon_module_name, "operators.track_batch")
     sent = {}
@@ -783,7 +784,8 @@ def test_a_folder_sent_to_a_cluster_sends_each_capture_with_the_panels_settings(
     choices = sent["settings"]
     assert (choices["preset"], choices["particles"], choices["iterations"], choices["seed"], choices["refine"]) == (
         "preview", 50, 4, 3, "none")
-    assert sent["extra_args"] == ["--smooth", "6.5", "--worker-command", "/opt/b/blender -b"]
+    assert sent["extra_args"] == ["--smooth", "6.5", "--no-foot-lock", "--foot-lock-speed", "0.3", "--worker-command",
+                                  "/opt/b/blender -b"]  # the panel's smoothing and foot locking reach the stitch
     assert sent["command"][-2:] == ["-m", "markerless_mocap"]  # bpy is a module here: this Python runs it
     assert m.is_tracking and m.batch_dir == str(out)
     while bpy.context.scene.name in track_batch._RUNS:
@@ -913,3 +915,16 @@ def test_track_on_local_processes_keys_the_stitched_take(addon_module_name, bpy_
     assert {"joints.npz", "report.json", "animation.bvh", "tracked.blend"} <= {p.name for p in result.iterdir()}
     assert compat.keyed_frame_range(arm) == (scene.frame_start, scene.frame_start + 11)
     assert not m.is_tracking and bpy.ops.mocap.track.poll()
+
+
+def test_the_status_says_the_take_was_smoothed_and_its_feet_locked(fake_track, monkeypatch):
+    bpy, _, arm, compat, tmp_path = fake_track
+    m = bpy.context.scene.mocap
+
+    def finish(self, export=True):  # what the real session lists when it smoothed and pinned the take
+        self.finished = {"joints": tmp_path / "j", "joints_raw": tmp_path / "r", "joints_unpinned": tmp_path / "u"}
+        return self.finished
+
+    monkeypatch.setattr(FakeSession, "finish", finish)
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert m.status.startswith("Tracked 3 frames, ") and m.status.endswith(" s/frame, smoothed at 8 Hz, feet locked")
