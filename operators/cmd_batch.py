@@ -292,6 +292,8 @@ class Batch:
 
     def run(self, runner):
         for run in self.runs:
+            if run.state == "failed":  # before anything ran (its actor calibration)
+                continue
             later = [f for f in run.folders[1:] if not f.done]
             if later and not run.seeds.is_file():  # the chunks after the first start where the seed pass says
                 run.seed_future = runner.submit(f"{run.take.name}-seeds", self.seed_argv(run))
@@ -456,6 +458,34 @@ class Batch:
             self._printed = (key, now)
 
 
+def calibrate_takes(takes, out):
+    """Fit the actor of each take with `calibrate = true` whose DIR/<take>/actor.json is not there yet (a rerun
+    reuses it): one `calibrate` command per take on its first frames, here, one after the other, before any chunk
+    is planned (the chunks track with the fit). Returns {take name: reason} for the takes whose fit failed."""
+    from ..core.batch.cluster import failure_text
+    from .actor_calibration import DEFAULT_FRAMES
+
+    failed = {}
+    for take in takes:
+        if not take.calibrate:
+            continue
+        folder = out / take.name
+        path = folder / "actor.json"
+        if not path.is_file():
+            first, last = take.frames[0], min(take.frames[1], take.frames[0] + DEFAULT_FRAMES - 1)
+            argv = [*default_command(), "calibrate", "--scene", str(take.scene), "--capture", str(take.capture),
+                    "--out", str(folder), "--frames", f"{first}-{last}"]
+            argv += (["--armature", take.armature] if take.armature else []) + option_args(take.choices)
+            print(f"batch: take {take.name!r}: calibrating the actor on frames {first}-{last}", file=sys.stderr,
+                  flush=True)
+            done = subprocess.run(argv, capture_output=True, text=True, env=command_environment())
+            if done.returncode != 0 or not path.is_file():
+                failed[take.name] = f"actor calibration: {failure_text(done)}"
+                continue
+        take.actor = path
+    return failed
+
+
 def _choices_of(args):
     return {name: getattr(args, name) for name in CHOICE_NAMES if getattr(args, name) is not None}
 
@@ -483,6 +513,7 @@ def run(args):
             raise InputError(f"--workers {args.workers}: at least one")
         takes = read_take_list(args.takes, defaults=_choices_of(args), scene=args.scene)
         check_rigs(takes)
+        uncalibrated = calibrate_takes(takes, out)
         runs = []
         for take in takes:
             try:
@@ -493,6 +524,8 @@ def run(args):
             key = chunk_key(take.settings().to_dict(), take.scene, take.armature, actor, take.capture)
             runs.append(TakeRun(take, plan, [ChunkFolder(chunks_root, take.name, c.track, key) for c in plan],
                                 seeds_path(chunks_root, take.name, *take.frames, key)))
+            if take.name in uncalibrated:  # fails alone; the other takes go on
+                runs[-1].fail(uncalibrated[take.name])
     except USER_ERRORS as exc:
         write_progress(out, {**blank, "state": "failed", "error": str(exc)})
         return cli_failure("batch", exc)

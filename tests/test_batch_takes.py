@@ -123,3 +123,34 @@ def test_a_chunk_that_fails_for_the_users_reason_is_not_run_again(bpy_module, tm
     err = capsys.readouterr().err
     assert "take 'short': chunk" in err and "frame 3 of camera cam2 cannot be read" in err
     assert counter.read_text().count("run") == runs
+
+
+@pytest.mark.parametrize("text, words", [
+    (_take("a", calibrate="yes"), "calibrate must be true or false"),
+    (_take("a", actor="anna.json") + "calibrate = true\n", "calibrate and actor both given"),
+])
+def test_a_takes_calibration_key_is_checked(tmp_path, text, words):
+    with pytest.raises(TakeListError, match=words):
+        read_take_list(_toml(tmp_path, text))
+
+
+def test_a_take_whose_actor_calibration_fails_fails_alone(bpy_module, tmp_path, capsys, monkeypatch):
+    """`calibrate = true`: the take's actor is fitted before its chunks are planned; when the fit fails, that take
+    fails with the calibration's own message and the other takes' chunks still run."""
+    import sys
+
+    from markerless_mocap.operators import cmd_batch
+    from markerless_mocap.operators.cli import main
+
+    counter = tmp_path / "chunks.txt"
+    fail = ("import sys; print('markerless_mocap calibrate: no person found in frames 0-5', file=sys.stderr); "
+            "sys.exit(2)")
+    chunk = (f"import sys; open({str(counter)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n'); "
+             "print('markerless_mocap track-chunk: stopped here by the test', file=sys.stderr); sys.exit(2)")
+    monkeypatch.setattr(cmd_batch, "default_command", lambda: [sys.executable, "-c", fail])
+    monkeypatch.setattr(cmd_batch.Batch, "chunk_argv", lambda self, run, c: [sys.executable, "-c", chunk, run.take.name])
+    path = _toml(tmp_path, _take("fitted", frames="0-5") + "calibrate = true\n" + _take("plain", frames="10-15"))
+    assert main(["batch", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--no-overlays"]) == 1
+    err = capsys.readouterr().err
+    assert "take 'fitted': actor calibration: markerless_mocap calibrate: no person found in frames 0-5" in err
+    assert counter.read_text().split() == ["plain"]  # the other take went on to its chunk

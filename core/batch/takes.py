@@ -8,6 +8,7 @@
     frames = "0-599"                optional: "A-B" inclusive or [A, B]; default every frame
     armature = "Armature"           optional
     actor = "anna/actor.json"       optional: an actor calibration to track with
+    calibrate = true                optional: fit the actor's proportions on the take's first frames first
     seed = 1                        optional: any tracking option, over [defaults]
 
 Every mistake is an InputError naming the take (or the file) and the fix, found before anything is tracked. Whether
@@ -26,7 +27,7 @@ from ..errors import InputError
 from ..tracking.options import CHOICE_NAMES, settings_from_choices
 from .chunk_folder import check_take_name
 
-TAKE_KEYS = ("name", "scene", "capture", "frames", "armature", "actor")
+TAKE_KEYS = ("name", "scene", "capture", "frames", "armature", "actor", "calibrate")
 SUBJECT_FILE = "subject.blend"  # a capture folder's own subject, when a batch is given a folder of captures
 
 
@@ -43,6 +44,7 @@ class Take:
     armature: str | None = None
     actor: Path | None = None
     choices: dict = field(default_factory=dict)  # tracking options (CHOICE_NAMES) given for this take
+    calibrate: bool = False  # fit the actor's proportions first (operators/cmd_batch.py); then `actor` is that fit
 
     def settings(self):
         return settings_from_choices(self.choices)
@@ -198,12 +200,18 @@ def _takes_of_file(path, defaults, scene):
         armature = entry.get("armature")
         if armature is not None and not isinstance(armature, str):
             raise TakeListError(f"{where}: armature must be the armature object's name (text)")
+        calibrate = entry.get("calibrate", False)
+        if not isinstance(calibrate, bool):
+            raise TakeListError(f"{where}: calibrate must be true or false")
+        if calibrate and "actor" in entry:
+            raise TakeListError(f"{where}: calibrate and actor both given: calibrate fits a new actor.json, actor "
+                                "reuses one; keep one of them")
         takes.append(Take(
             name, _path(entry["scene"], base, where, "scene") if "scene" in entry else Path(scene),
             _path(entry["capture"], base, where, "capture"),
             _parse_frames(entry["frames"], where) if "frames" in entry else None, armature,
             _path(entry["actor"], base, where, "actor") if "actor" in entry else None,
-            {**defaults, **_choices(entry, where)}))
+            {**defaults, **_choices(entry, where)}, calibrate))
     return takes
 
 
