@@ -148,7 +148,8 @@ def test_a_take_whose_actor_calibration_fails_fails_alone(bpy_module, tmp_path, 
     chunk = (f"import sys; open({str(counter)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n'); "
              "print('markerless_mocap track-chunk: stopped here by the test', file=sys.stderr); sys.exit(2)")
     monkeypatch.setattr(cmd_batch, "default_command", lambda: [sys.executable, "-c", fail])
-    monkeypatch.setattr(cmd_batch.Batch, "chunk_argv", lambda self, run, c: [sys.executable, "-c", chunk, run.take.name])
+    monkeypatch.setattr(cmd_batch.Batch, "chunk_argv",
+                        lambda self, run, c: [sys.executable, "-c", chunk, run.take.name])
     path = _toml(tmp_path, _take("fitted", frames="0-5") + "calibrate = true\n" + _take("plain", frames="10-15"))
     assert main(["batch", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--no-overlays"]) == 1
     err = capsys.readouterr().err
