@@ -335,6 +335,50 @@ SCENES["crossing"] = dict(
     crossing=dict(bvh="131_01.bvh", start=142, stop=(92, 0.72), pass_m=0.45, pass_side_deg=45,
                   colours={"shirt": (0.1, 0.12, 0.155), "trousers": (0.035, 0.035, 0.042)}))
 SCENES["crossing_alone"] = dict(CROSSING, subject_from="crossing")
+# issue 42's DEVELOPMENT scene, rendered on 2026-11-27: meant to be tuned on (figures on it are never held-out
+# results; the held-out crossing judges what is tuned here). The same idea as crossing, everything else other: the
+# actor turns round in a few steps, stands, then crouches to jump, swinging the arms forward (01_01 source frames
+# 490-549: apart from crossing's; no 60 frames of the clip avoid every other scene's, these share 20 with actor9's); a
+# second person dressed like it walks 131_01 from source frame 150 (walking, then stopping), passes between it and
+# cam1, then cam2 (hips 0.47 m from the actor's at the closest), and stops beside it. Own seed, cameras and clothes;
+# studio room with plates. crossing_dev_alone is the same take without the second person.
+CROSSING_DEV = dict(bvh="01_01.bvh", start=490, n_frames=60, seed=4545, uncontrolled=False, calibration="toml",
+                    cameras_from_facing=True,
+                    cameras=[
+                        (-25, 3.7, 1.70, 540, (-4.0, 5.0), -0.9),
+                        (-55, 3.5, 1.50, 520, (5.5, -2.5), 1.1),
+                        (70, 3.9, 1.80, 560, (-3.0, -6.0), 0.4),
+                        (160, 3.6, 1.40, 505, (6.0, 3.0), -1.3)],
+                    colours={"shirt": (0.05, 0.12, 0.115), "trousers": (0.065, 0.055, 0.045)})
+SCENES["crossing_dev"] = dict(
+    CROSSING_DEV,
+    crossing=dict(bvh="131_01.bvh", start=150, stop=(-100, 0.78), pass_m=0.47, pass_side_deg=-45,
+                  colours={"shirt": (0.06, 0.125, 0.11), "trousers": (0.06, 0.05, 0.045)}))
+SCENES["crossing_dev_alone"] = dict(CROSSING_DEV, subject_from="crossing_dev")
+# issue 42, several actors, rendered on 2026-11-27 before anything was tuned for it (held out): two tracked actors
+# of different builds, each with its own armature in subject.blend (`Lead`, `Partner`: the standard character as
+# in every scene) and its own ground truth. The Lead is crossing's actor (01_01 source frames 244-303, standing,
+# turning round, standing) with actor2's build; the Partner walks 131_01 from source frame 156 (walking, then
+# slowing to a stop at about clip frame 48) with actor3's build. Its walk is bent (`turn`: first clip frame, frames,
+# degrees) so that it passes behind the Lead's back 0.67 m from its hips, between it and cam1 (then cam2), while the
+# Lead turns round, and stops facing it at `stop` (azimuth from the Lead's last facing in degrees, metres from its
+# last hips); then both right hands reach to meet midway (`handshake`) and hold. Its start (156, not crossing's 142)
+# lets it stop before the handshake. Cameras by azimuth from the Lead's first facing, chosen so that each person
+# hides the other in two views; studio room as crossing's.
+SCENES["duet"] = dict(
+    bvh="01_01.bvh", start=244, n_frames=60, seed=4343, uncontrolled=False, calibration="toml",
+    cameras_from_facing=True,
+    cameras=[
+        (155, 3.7, 1.55, 535, (-4.0, 3.0), 0.8),
+        (210, 3.6, 1.80, 550, (5.5, -2.5), -1.1),
+        (345, 3.8, 1.40, 520, (-3.0, -5.0), 0.5),
+        (40, 3.5, 1.70, 540, (6.0, 4.0), -0.7)],
+    colours={"shirt": (0.2, 0.045, 0.03), "trousers": (0.03, 0.032, 0.04)},
+    proportions=SCENES["actor2"]["proportions"], proportions_from="actor2", armature="Lead",
+    partner=dict(name="Partner", bvh="131_01.bvh", start=156, stop=(20, 0.9), facing_offset_deg=0,
+                 turn=(28, 18, 120), proportions=SCENES["actor3"]["proportions"], proportions_from="actor3",
+                 colours={"shirt": (0.045, 0.12, 0.05), "trousers": (0.14, 0.11, 0.07), "hair": (0.1, 0.06, 0.03)}),
+    handshake=dict(first_frame=45, frames_in=6, above_hips_m=0.18))
 MASK_FRAMES = 5
 
 
@@ -475,13 +519,15 @@ def gesture_weights(gestures, F):
     return out
 
 
-def add_arm_gestures(res, names, parents, rest, gestures):
+def add_arm_gestures(res, names, parents, rest, gestures, world=None):
     """Key hand-to-face, arms-crossed, overhead and hand-to-shoulder motion on top of the retargeted clip:
     per frame, each arm's wrist is moved (along a path bulging forward, so it does not go through the body)
-    towards a target in the body's frame, and the shoulder and elbow are turned by two-bone IK. Changes res
-    in place."""
+    towards a target in the body's frame, and the shoulder and elbow are turned by two-bone IK. A target
+    ("reach", (x, y, z)) is a point in the world instead (the armature object's matrix_world is `world`, identity
+    if None): the wrist goes there. Changes res in place."""
     F = res.basis_rotations.shape[0]
     idx = {n: k for k, n in enumerate(names)}
+    to_armature = np.linalg.inv(np.eye(4) if world is None else np.asarray(world, float))
     basis = res.basis_rotations.copy()
     pose = forward_kinematics(basis, res.root_location, rest, parents)
     for w, targets in gesture_weights(gestures, F):
@@ -496,7 +542,10 @@ def add_arm_gestures(res, names, parents, rest, gestures):
                 fwd = np.cross(lat, up)                                  # left x up = forward (Z up, right-handed)
                 side_dir = lat if side == "Left" else -lat
                 chest = hips + 0.62 * (neck - hips)
-                if kind == "face":
+                if isinstance(kind, tuple) and kind[0] == "reach":   # a handshake: the elbow low and out
+                    T = to_armature[:3, :3] @ np.asarray(kind[1], float) + to_armature[:3, 3]
+                    pole = -up + 0.5 * side_dir - 0.2 * fwd
+                elif kind == "face":
                     T = head - 0.03 * up + 0.13 * fwd + 0.03 * side_dir
                     pole = -up + 0.6 * side_dir - 0.2 * fwd
                 elif kind == "cross":
@@ -690,25 +739,216 @@ def add_crossing_person(spec, data, data_dir, F, P, names, facing_deg):
         lowest_point_m=[float(low2.min()), float(low2.max())])
 
 
-def overlap_by_second_person(cam_objs, body, body2, cams, P, P2, frames):
+def root_yaw(pose_root, rest_root):
+    """The facing azimuth (radians, world or armature frame) of a root pose matrix: the rest pose faces -Y."""
+    f = pose_root[:3, :3] @ rest_root[:3, :3].T @ np.array([0.0, -1.0, 0.0])
+    return math.atan2(f[1], f[0])
+
+
+def turn_walk(res, names, parents, rest, first, frames, degrees):
+    """Bend a walk: from clip frame `first`, over `frames` frames, the body turns `degrees` about the vertical
+    (smoothstep) and its steps turn with it, so the path curves rather than the body pivoting in place.
+    Changes res in place."""
+    root = names.index("Hips")
+    F = res.basis_rotations.shape[0]
+    h = res.pose_matrices[:, root, :3, 3]
+    u = np.clip((np.arange(F) - first + 1) / frames, 0.0, 1.0)
+    theta = math.radians(degrees) * u * u * (3 - 2 * u)
+    new_h = h.copy()
+    inv_rest = np.linalg.inv(rest[root])
+    for f in range(F):
+        c, s_ = math.cos(theta[f]), math.sin(theta[f])
+        Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        if f:
+            new_h[f, :2] = new_h[f - 1, :2] + Rz[:2, :2] @ (h[f, :2] - h[f - 1, :2])
+        A = np.eye(4)
+        A[:3, :3] = Rz
+        A[:3, 3] = new_h[f] - Rz @ h[f]
+        B = inv_rest @ A @ res.pose_matrices[f, root]
+        res.basis_rotations[f, root] = B[:3, :3]
+        res.root_location[f] = B[:3, 3]
+    res.pose_matrices = forward_kinematics(res.basis_rotations, res.root_location, rest, parents)
+    return res
+
+
+def partner_placement(spec, res2, names2, rest2, P, names, lead_last_yaw):
+    """The partner's armature matrix (without its floor height): its last hips `stop` = (azimuth from the Lead's
+    last facing in degrees, metres) from the Lead's last hips, facing them (plus `facing_offset_deg`)."""
+    root, root2 = names.index("Hips"), names2.index("Hips")
+    a = lead_last_yaw + math.radians(spec["stop"][0])
+    stop = P[-1, root, :2] + spec["stop"][1] * np.array([math.cos(a), math.sin(a)])
+    to_lead = P[-1, root, :2] - stop
+    want = math.atan2(to_lead[1], to_lead[0]) + math.radians(spec.get("facing_offset_deg", 0.0))
+    ang = want - root_yaw(res2.pose_matrices[-1, root2], rest2[root2])
+    c, s_ = math.cos(ang), math.sin(ang)
+    G = np.eye(4)
+    G[:2, :2] = [[c, -s_], [s_, c]]
+    G[:2, 3] = stop - G[:2, :2] @ res2.pose_matrices[-1, root2, :2, 3]
+    return G
+
+
+def add_partner(spec, subject_data, data_dir, F, P, names, lead_last_yaw):
+    """Issue 42's second tracked actor: the standard body scaled to `spec`'s proportions, in its own clothes,
+    walking `spec`'s clip bent by `turn` and placed by partner_placement. Returns its armature, body, retarget
+    result (keyed), rig arrays, joints (F, B, 3, evaluated by Blender) and its body data."""
+    from mathutils import Matrix
+    data2 = subject.scaled_subject_data(subject_data, Proportions(**spec["proportions"]))
+    arm2, body2 = subject.build_subject(bpy, data2, colours=spec.get("colours"))
+    arm2.name, body2.name = spec["name"], spec["name"] + "Body"
+    _, res2, names2, parents2, rest2, *_ = retarget_scene(dict(bvh=spec["bvh"], start=spec["start"]), data_dir,
+                                                          arm2, F)
+    if spec.get("turn"):
+        turn_walk(res2, names2, parents2, rest2, *spec["turn"])
+    key_motion(arm2, res2, names2)
+    _, low2 = evaluated_joints_and_floor(arm2, body2, names2, F)
+    G = partner_placement(spec, res2, names2, rest2, P, names, lead_last_yaw)
+    G[2, 3] = -float(np.median(low2))
+    arm2.matrix_world = Matrix(G.tolist())
+    P2, _ = evaluated_joints_and_floor(arm2, body2, names2, F)
+    return dict(arm=arm2, body=body2, res=res2, names=names2, parents=parents2, rest=rest2, G=G, P=P2, data=data2)
+
+
+def add_duet(cfg, name, arm, body, res, names, parents, rest, subject_data, data_dir, F, P):
+    """The duet's Partner (add_partner) and the handshake, keyed on both as a "reach" gesture of the right arm
+    (add_arm_gestures) after the Lead's floor shift. Returns the Lead's joints again and the Partner: its objects,
+    joints P, first-frame yaw (as build_scene's yaw0), and the records for scene_info.json."""
+    spec, hs = cfg["partner"], cfg["handshake"]
+    root = names.index("Hips")
+    p = add_partner(spec, subject_data, data_dir, F, P, names, root_yaw(res.pose_matrices[-1, root], rest[root]))
+    if p["names"] != names:
+        raise RuntimeError("the two actors' rigs name their bones differently")
+    hold = F - hs["first_frame"] - hs["frames_in"]
+    if hold > 0:   # (a --quick run's 8 frames end before it)
+        meet, lead_T, partner_T = handshake_targets(hs, P, p["P"], names, F)
+        add_arm_gestures(res, names, parents, rest, [(hs["first_frame"], hs["frames_in"], hold, 0,
+                                                       {"Right": ("reach", tuple(lead_T))})])
+        key_motion(arm, res, names)
+        P, _ = evaluated_joints_and_floor(arm, body, names, F)
+        add_arm_gestures(p["res"], names, p["parents"], p["rest"], [(hs["first_frame"], hs["frames_in"], hold, 0,
+                                                                     {"Right": ("reach", tuple(partner_T))})],
+                         world=p["G"])
+        key_motion(p["arm"], p["res"], names)
+    P2, low2 = evaluated_joints_and_floor(p["arm"], p["body"], names, F)
+    for who, Q, heads, M in (("Lead", P, res.head_positions(), np.eye(4)), ("Partner", P2, p["res"].head_positions(),
+                                                                               p["G"])):
+        err = np.abs(Q - (heads @ M[:3, :3].T + M[:3, 3])).max()
+        if err > 1e-3:
+            raise RuntimeError(f"[{name}] {who}: Blender's evaluated pose disagrees with the keyed one ({err:.4f} m)")
+    i = {n: k for k, n in enumerate(names)}
+    hips_d = np.linalg.norm(P2[:, root, :2] - P[:, root, :2], axis=1)
+    before = min(hs["first_frame"], F)
+    joint_d = np.linalg.norm(P2[:before, :, None] - P[:before, None], axis=3).min(axis=(1, 2))
+    speed = np.linalg.norm(np.diff(P2[:, root, :2], axis=0), axis=1) * FPS
+    moving = np.nonzero(speed >= 0.1)[0]
+    wrists = np.linalg.norm(P2[:, i["RightHand"]] - P[:, i["RightHand"]], axis=1)
+    facing = {}
+    for who, Q, other, M, r, rst in (("Lead", P, P2, np.eye(4), res, rest), ("Partner", P2, P, p["G"], p["res"],
+                                                                               p["rest"])):
+        to_other = other[-1, root, :2] - Q[-1, root, :2]
+        yaw = root_yaw(M @ r.pose_matrices[-1, root], rst[root])
+        facing[who] = (math.degrees(yaw - math.atan2(to_other[1], to_other[0])) + 180) % 360 - 180
+    p["P"] = P2
+    p["name"] = spec["name"]
+    p["yaw0"] = root_yaw(p["G"] @ p["res"].pose_matrices[0, root], p["rest"][root]) - math.atan2(-1.0, 0.0)
+    p["info"] = dict(
+        source=f"{spec['bvh']} frames {spec['start']}..{spec['start'] + F - 1} at {FPS} fps",
+        note="a second tracked actor: its own build (the standard body scaled as proportions_from's actor), clothes, "
+             f"armature in subject.blend and truth (gt_joints_{spec['name']}.npz, gt_masks_{spec['name']}/); its "
+             "walk bent by `turn` (the body and its steps turned about the vertical, smoothstep) and placed so that "
+             "it stops at `stop` facing the Lead",
+        turn=dict(first_frame=spec["turn"][0], frames=spec["turn"][1], degrees=spec["turn"][2]),
+        stop_azimuth_from_lead_last_facing_deg=spec["stop"][0], stop_distance_m=spec["stop"][1],
+        armature_matrix_world=p["G"].tolist(),
+        hips_distance_m=np.round(hips_d, 4).tolist(),
+        closest_hips_m=float(hips_d.min()), closest_hips_frame=int(hips_d.argmin()),
+        closest_joints_before_handshake_m=float(joint_d.min()),
+        closest_joints_before_handshake_frame=int(joint_d.argmin()), last_frame_hips_m=float(hips_d[-1]),
+        walking_speed_m_per_s=[float(speed.min()), float(speed.max())],
+        slower_than_0_1_m_per_s_from_frame=int(moving[-1] + 1) if len(moving) else 0,
+        last_frame_speed_m_per_s=float(speed[-1]),
+        last_frame_facing_off_the_other_deg=facing,
+        lowest_point_m=[float(low2.min()), float(low2.max())])
+    p["handshake"] = None
+    log(f"[{name}] {spec['name']}: hips {hips_d.min():.3f} m from the Lead's at frame {hips_d.argmin()}, joints "
+        f"{joint_d.min():.3f} m at frame {joint_d.argmin()} before the handshake, {hips_d[-1]:.3f} m at the last "
+        f"frame; slower than 0.1 m/s from frame {p['info']['slower_than_0_1_m_per_s_from_frame']}; facing off the "
+        f"other at the end: " + ", ".join(f"{k} {v:+.0f} deg" for k, v in facing.items()))
+    if hold <= 0:
+        return P, p
+    held = np.arange(hs["first_frame"] + hs["frames_in"], F)
+    miss = max(np.linalg.norm(P[held, i["RightHand"]] - lead_T, axis=1).max(),
+               np.linalg.norm(P2[held, i["RightHand"]] - partner_T, axis=1).max())
+    p["handshake"] = dict(
+        note="both right hands reach (two-bone IK, smoothstep in) to meet midway between the right shoulders, "
+             f"{hs['above_hips_m']} m above the mean hips height, each wrist a palm (0.06 m) short of the meeting "
+             "point, and hold to the last frame; in both actors' ground truth",
+        first_frame=hs["first_frame"], frames_in=hs["frames_in"], held_frames=[int(held[0]), int(held[-1])],
+        meeting_point=meet.tolist(), wrist_targets={"Lead": lead_T.tolist(), "Partner": partner_T.tolist()},
+        wrist_target_miss_when_held_m=float(miss), right_wrists_distance_m=np.round(wrists, 4).tolist(),
+        hips_distance_when_held_m=[float(hips_d[held].min()), float(hips_d[held].max())])
+    log(f"[{name}] handshake: frames {hs['first_frame']}-{F - 1} (held from {held[0]}), meeting point "
+        f"{np.round(meet, 3).tolist()}, wrists {wrists[held].min():.3f}-{wrists[held].max():.3f} m apart when held, "
+        f"targets missed by {miss * 1000:.1f} mm at most")
+    return P, p
+
+
+def _frame_ranges(frames):
+    """'3-9, 14-20' for the sorted frame numbers given."""
+    out, start = [], None
+    for k, f in enumerate(frames):
+        if start is None:
+            start = f
+        if k + 1 == len(frames) or frames[k + 1] != f + 1:
+            out.append(f"{start}-{f}" if f != start else f"{f}")
+            start = None
+    return ", ".join(out)
+
+
+def handshake_targets(spec, P, P2, names, F):
+    """Where each right wrist goes for the handshake: the hands meet midway between the two right shoulders
+    (averaged over the held frames), `above_hips_m` over the mean hips height, each wrist a palm's length short
+    of that point on its own side of the clasp."""
+    i = {n: k for k, n in enumerate(names)}
+    hold = np.arange(spec["first_frame"] + spec["frames_in"], F)
+    meet = np.empty(3)
+    meet[:2] = ((P[hold, i["RightArm"], :2] + P2[hold, i["RightArm"], :2]) / 2).mean(axis=0)
+    meet[2] = ((P[hold, i["Hips"], 2] + P2[hold, i["Hips"], 2]) / 2).mean() + spec["above_hips_m"]
+    u = np.zeros(3)
+    u[:2] = _unit(P2[-1, i["Hips"], :2] - P[-1, i["Hips"], :2])
+    left = np.array([-u[1], u[0], 0.0])          # the Lead's left
+    palm, side = 0.06, 0.015
+    return meet, meet - palm * u - side * left, meet + palm * u + side * left
+
+
+def _hidden_fractions(dir_a, dir_b, cam_objs, cams, P, P2, frames):
+    """Per camera and frame, the share of body a's mask (dir_a) that body b's (dir_b) covers while b's hips are
+    nearer the camera."""
+    out = {}
+    for ob, cam in zip(cam_objs, cams):
+        _, z1 = cam.project_with_depth(P[:, 0])
+        _, z2 = cam.project_with_depth(P2[:, 0])
+        frac = []
+        for f in frames:
+            a = cv2.imread(str(dir_a / ob.name / f"{f:04d}.png"), cv2.IMREAD_GRAYSCALE) > 0
+            b = cv2.imread(str(dir_b / ob.name / f"{f:04d}.png"), cv2.IMREAD_GRAYSCALE) > 0
+            frac.append(float((a & b).sum() / max(a.sum(), 1)) if z2[f] < z1[f] else 0.0)
+        frac = np.array(frac)
+        out[ob.name] = dict(hidden_fraction=np.round(frac, 3).tolist(), max_hidden=float(frac.max()),
+                            frames_hidden_over_20_percent=int((frac > 0.2).sum()))
+    return out
+
+
+def overlap_by_second_person(cam_objs, body, body2, cams, P, P2, frames, both_ways=False):
     """Per camera and frame, the fraction of the subject's silhouette that the second person's covers while its
-    hips are nearer the camera (Workbench masks of each body alone, every frame): where it hides the subject."""
+    hips are nearer the camera (Workbench masks of each body alone, every frame): where it hides the subject.
+    both_ways: also the reverse (where the subject hides the second person), as a second dict."""
     tmp = Path(tempfile.mkdtemp(prefix="overlap_"))
     try:
         render_masks(cam_objs, body, tmp / "a", frames)
         render_masks(cam_objs, body2, tmp / "b", frames)
-        out = {}
-        for ob, cam in zip(cam_objs, cams):
-            _, z1 = cam.project_with_depth(P[:, 0])
-            _, z2 = cam.project_with_depth(P2[:, 0])
-            frac = []
-            for f in frames:
-                a = cv2.imread(str(tmp / "a" / ob.name / f"{f:04d}.png"), cv2.IMREAD_GRAYSCALE) > 0
-                b = cv2.imread(str(tmp / "b" / ob.name / f"{f:04d}.png"), cv2.IMREAD_GRAYSCALE) > 0
-                frac.append(float((a & b).sum() / max(a.sum(), 1)) if z2[f] < z1[f] else 0.0)
-            frac = np.array(frac)
-            out[ob.name] = dict(hidden_fraction=np.round(frac, 3).tolist(), max_hidden=float(frac.max()),
-                                frames_hidden_over_20_percent=int((frac > 0.2).sum()))
+        out = _hidden_fractions(tmp / "a", tmp / "b", cam_objs, cams, P, P2, frames)
+        if both_ways:
+            return out, _hidden_fractions(tmp / "b", tmp / "a", cam_objs, cams, P2, P, frames)
         return out
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -859,12 +1099,46 @@ def render_masks(cam_objs, body, out_dir, frames):
 
 # ---------------------------------------------------------------- subject.blend
 def save_subject_blend(data, path, hips_world0, yaw0, rng, colours=None, offset=None, dyaw=None, fps=FPS,
-                       floor_z=0.0):
+                       floor_z=0.0, actors=()):
     """Armature + mesh in rest pose, placed where the person starts with a seeded error
-    (or with the given horizontal offset in metres and yaw error in radians), soles at floor_z."""
-    from mathutils import Matrix
+    (or with the given horizontal offset in metres and yaw error in radians), soles at floor_z.
+    actors: for several (the duet), one dict per actor: the first (this call's subject) gives its `name`, each
+    further one dict(name, hips_world0, yaw0, colours) is placed the same way (its random draws after the
+    first's). Each armature and its data are named after the actor, its mesh NAMEBody. Returns the first's
+    placement, the others' in `others_placement`."""
     bpy.ops.wm.read_homefile(use_empty=True)
     arm, body = subject.build_subject(bpy, data, colours=colours)
+    record = _place_subject(arm, hips_world0, yaw0, rng, offset, dyaw, floor_z)
+    if actors:
+        _name_subject(arm, body, actors[0]["name"])
+        placed = {}
+        for actor in actors[1:]:
+            arm2, body2 = subject.build_subject(bpy, data, colours=actor.get("colours"))
+            _name_subject(arm2, body2, actor["name"])
+            placed[actor["name"]] = _place_subject(arm2, actor["hips_world0"], actor["yaw0"], rng, None, None,
+                                                   floor_z)
+        record["others_placement"] = placed
+    bpy.context.scene.render.fps = int(round(fps))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True)
+    # The version-neutral source: this bpy's .blend does not open in older Blenders, so subject.blend is
+    # rebuilt from it by the oldest Blender at hand (tests/real_blender/stage.sh --resave-subjects).
+    sys.path.insert(0, str(REPO / "tools"))
+    import portable_subject
+    portable_subject.save_source(portable_subject.dump(), path.with_name("subject_source.json.gz"))
+    return record
+
+
+def _name_subject(arm, body, name):
+    """An actor's armature (object and data) named `name`, its mesh NAMEBody, its materials NAME_region."""
+    arm.name = arm.data.name = name
+    body.name = body.data.name = f"{name}Body"
+    for mat in body.data.materials:
+        mat.name = f"{name}_{mat.name.split('.')[0].removeprefix('mocap_')}"
+
+
+def _place_subject(arm, hips_world0, yaw0, rng, offset, dyaw, floor_z):
+    from mathutils import Matrix
     if offset is None:
         ang = rng.uniform(0, 2 * np.pi)
         offset = 0.10 * np.array([math.cos(ang), math.sin(ang)])
@@ -880,18 +1154,8 @@ def save_subject_blend(data, path, hips_world0, yaw0, rng, colours=None, offset=
     target = np.array([hips_world0[0] + offset[0], hips_world0[1] + offset[1], hips_rest[2] + floor_z])
     M[:3, 3] = target - Rz @ hips_rest
     arm.matrix_world = Matrix(M.tolist())
-    bpy.context.scene.render.fps = int(round(fps))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True)
-    # The version-neutral source: this bpy's .blend does not open in older Blenders, so subject.blend is
-    # rebuilt from it by the oldest Blender at hand (tests/real_blender/stage.sh --resave-subjects).
-    sys.path.insert(0, str(REPO / "tools"))
-    import portable_subject
-    portable_subject.save_source(portable_subject.dump(), path.with_name("subject_source.json.gz"))
     return dict(offset_m=offset.tolist(), offset_norm_m=float(np.linalg.norm(offset)),
                 yaw_error_deg=math.degrees(dyaw), armature_matrix_world=M.tolist())
-
-
 
 
 def reuse_subject(source_dir, out, hips_world0, yaw0, hips_rest):
@@ -922,9 +1186,12 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     if cfg.get("proportions"):
         subject_data = data
         data = subject.scaled_subject_data(data, Proportions(**cfg["proportions"]))
-        first_hips_xy = json.loads((out_root / cfg["subject_from"] / "scene_info.json").read_text())[
-            "first_frame_hips"][:2]
+        if cfg.get("subject_from"):
+            first_hips_xy = json.loads((out_root / cfg["subject_from"] / "scene_info.json").read_text())[
+                "first_frame_hips"][:2]
     arm, body = subject.build_subject(bpy, data, colours=cfg.get("colours"))
+    if cfg.get("partner"):
+        arm.name, body.name = cfg["armature"], cfg["armature"] + "Body"
     clip, res, names, parents, rest, tails, shift = retarget_scene(cfg, data_dir, arm, F, first_hips_xy)
     if cfg.get("gestures"):
         add_arm_gestures(res, names, parents, rest, cfg["gestures"])
@@ -968,12 +1235,24 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
         az0 = math.degrees(math.atan2(-n[1], -n[0]))
         cam_spec = [(az0 + az, *rest_) for az, *rest_ in cam_spec]
         P2, second_info = add_second_person(cfg["second"], data, data_dir, F, centre, d, n)
+    partner = None
+    if cfg.get("partner"):
+        P, partner = add_duet(cfg, name, arm, body, res, names, parents, rest, subject_data, data_dir, F, P)
+        P2, body2 = partner["P"], partner["body"]
     cams = make_cameras(cam_spec, centre)
+    tracked = [("the subject", P)] if partner is None else [(cfg["armature"], P), (partner["name"], P2)]
     for cam in cams:
-        uv, depth = cam.project_with_depth(P.reshape(-1, 3))
-        inside = (uv[:, 0] > 8) & (uv[:, 0] < W - 9) & (uv[:, 1] > 8) & (uv[:, 1] < H - 9) & (depth > 0)
-        if not inside.all():
-            raise RuntimeError(f"[{name}] {cam.name}: {np.count_nonzero(~inside)} joint projections leave the image")
+        for who, Q in tracked:   # every tracked actor's joints well inside every image
+            uv, depth = cam.project_with_depth(Q.reshape(-1, 3))
+            inside = (uv[:, 0] > 8) & (uv[:, 0] < W - 9) & (uv[:, 1] > 8) & (uv[:, 1] < H - 9) & (depth > 0)
+            if not inside.all():
+                msg = f"[{name}] {cam.name}: {np.count_nonzero(~inside)} joint projections of {who} leave the image"
+                if quick and partner is not None and who == partner["name"]:
+                    log(msg + " (a --quick run places the Partner by its 8 frames' end)")
+                    continue
+                raise RuntimeError(msg)
+    if partner is not None:
+        partner["info"]["views"] = second_person_visibility(cams, P, P2)
     if second_info is not None:
         second_info["views"] = second_person_visibility(cams, P, P2)
         log(f"[{name}] second person: " + "; ".join(
@@ -1017,6 +1296,11 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
         np.savez_compressed(out / "second_person_joints.npz", names=np.array(names), frames=np.arange(F),
                             positions=P2.astype(np.float64), fps=np.float64(FPS),
                             source=np.array(second_info["source"]))
+    if partner is not None:   # every actor's truth, named after its armature (the Lead's is gt_joints.npz too)
+        for who, Q, src in ((cfg["armature"], P, f"{cfg['bvh']} frames {cfg['start']}..{cfg['start'] + F - 1} at "
+                                                 f"{FPS} fps"), (partner["name"], P2, partner["info"]["source"])):
+            np.savez_compressed(out / f"gt_joints_{who}.npz", names=np.array(names), frames=np.arange(F),
+                                positions=Q.astype(np.float64), fps=np.float64(FPS), source=np.array(src))
     mask_frames = np.linspace(0, F - 1, MASK_FRAMES).round().astype(int).tolist()
     shutil.rmtree(out / "gt_masks", ignore_errors=True)
     if render:
@@ -1049,6 +1333,19 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     render_masks(cam_objs, body, out / "gt_masks", mask_frames)
+    if partner is not None:
+        shutil.rmtree(out / f"gt_masks_{partner['name']}", ignore_errors=True)
+        render_masks(cam_objs, body2, out / f"gt_masks_{partner['name']}", mask_frames)
+        lead_hidden, partner_hidden = overlap_by_second_person(cam_objs, body, body2, cams, P, P2, list(range(F)),
+                                                               both_ways=True)
+        hidden = {f"{cfg['armature']}_hidden_by_{partner['name']}": lead_hidden,
+                  f"{partner['name']}_hidden_by_{cfg['armature']}": partner_hidden}
+        for k, v in hidden.items():
+            log(f"[{name}] {k}: " + "; ".join(
+                f"{c}: up to {h['max_hidden']:.2f}, > 20 % in {h['frames_hidden_over_20_percent']} frames"
+                + (f" ({_frame_ranges(np.nonzero(np.array(h['hidden_fraction']) > 0.2)[0])})"
+                   if h['frames_hidden_over_20_percent'] else "")
+                for c, h in v.items()))
     if body2 is not None and cfg.get("crossing"):
         second_info["hidden_by_second_person"] = overlap_by_second_person(cam_objs, body, body2, cams, P, P2,
                                                                           list(range(F)))
@@ -1062,6 +1359,13 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     if cfg.get("subject_from"):
         placement = reuse_subject(out_root / cfg["subject_from"], out, hips[0], yaw0,
                                   (subject_data if cfg.get("proportions") else data)["bones"]["Hips"]["head"])
+    elif partner is not None:   # both actors' armatures, the standard character, each placed on its own person
+        placement = save_subject_blend(subject_data, out / "subject.blend", hips[0], yaw0, rng,
+                                       colours=cfg.get("colours"), actors=[
+                                           dict(name=cfg["armature"]),
+                                           dict(name=partner["name"], hips_world0=P2[0, rootb], yaw0=partner["yaw0"],
+                                                colours=cfg["partner"].get("colours"))])
+        partner["placement"] = placement.pop("others_placement")[partner["name"]]
     else:
         placement = save_subject_blend(data, out / "subject.blend", hips[0], yaw0, rng, colours=cfg.get("colours"))
     info = dict(scene=name, source=cfg["bvh"], first_source_frame_30fps=cfg["start"], n_frames=F, fps=FPS,
@@ -1087,6 +1391,25 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
             proportions=cfg["proportions"],
             true_segment_lengths_m=subject.segment_lengths_of(data, rest, names),
             subject_segment_lengths_m=subject.segment_lengths_of(subject_data, rest, names))
+    if partner is not None:
+        lead, other = cfg["armature"], partner["name"]
+        info["actors"] = {
+            lead: dict(armature=lead, gt_joints=f"gt_joints_{lead}.npz", gt_masks="gt_masks",
+                       source=info["source"] + f" frames {cfg['start']}..{cfg['start'] + F - 1} at {FPS} fps",
+                       proportions_from=cfg.get("proportions_from"), proportions=cfg["proportions"],
+                       true_segment_lengths_m=info["actor"]["true_segment_lengths_m"],
+                       clothing_colours_linear_rgb=cfg.get("colours"), first_frame_hips=hips[0].tolist(),
+                       first_frame_yaw_deg=math.degrees(yaw0), subject_placement=placement),
+            other: dict(armature=other, gt_joints=f"gt_joints_{other}.npz", gt_masks=f"gt_masks_{other}",
+                        source=partner["info"]["source"], proportions_from=cfg["partner"].get("proportions_from"),
+                        proportions=cfg["partner"]["proportions"],
+                        true_segment_lengths_m=subject.segment_lengths_of(partner["data"], rest, names),
+                        clothing_colours_linear_rgb=cfg["partner"].get("colours"),
+                        first_frame_hips=P2[0, rootb].tolist(), first_frame_yaw_deg=math.degrees(partner["yaw0"]),
+                        subject_placement=partner["placement"])}
+        info["partner"] = partner["info"]
+        info["handshake"] = partner["handshake"]
+        info["hidden"] = hidden
     (out / "scene_info.json").write_text(json.dumps(info, indent=1))
     log(f"[{name}] done -> {out}")
 

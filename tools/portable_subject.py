@@ -9,10 +9,12 @@ plain numbers) and its `subject.blend` is built from that source by the oldest B
     python tools/portable_subject.py dump SUBJECT.blend SOURCE.json.gz            (any bpy / blender)
     blender -b --factory-startup --python tools/portable_subject.py -- build SOURCE.json.gz SUBJECT.blend
 
-Only what the sample subjects use is kept: one armature (bones, rest pose, pose-bone rotation modes and
-locks), meshes skinned to it (vertices, faces, smooth flags, material slots, vertex groups, Armature
-modifier, parenting) and node materials (node types, their settings, unlinked input values, links).
-Runs inside Blender's own Python: bpy and the standard library only.
+Only what the sample subjects use is kept: the armatures (bones, rest pose, pose-bone rotation modes and
+locks), the meshes skinned to each (vertices, faces, smooth flags, material slots, vertex groups, Armature
+modifier, parenting) and node materials (node types, their settings, unlinked input values, links). A scene of
+one armature is written as version 1 ("armature", "meshes"); one of several actors (sample_scenes/duet) as
+version 2 ("subjects": a list of {"armature", "meshes"}), which a reader of version 1 refuses rather than
+building only the first. Runs inside Blender's own Python: bpy and the standard library only.
 """
 import gzip
 import json
@@ -20,6 +22,7 @@ import sys
 
 FORMAT = "markerless_mocap.portable_subject"
 VERSION = 1
+SEVERAL_VERSION = 2  # several armatures; the version-1 layout is kept for one, so those files do not change
 
 # Node settings worth carrying (those that exist on the node in the running Blender are set).
 _NODE_SETTINGS = ("blend_type", "use_clamp", "noise_dimensions", "noise_type", "normalize", "data_type",
@@ -79,14 +82,36 @@ def dump_material(mat):
 
 
 def dump(scene=None):
-    """The subject of `scene` (its only armature and the meshes skinned to it) as plain data."""
+    """The subjects of `scene` (its armatures and the meshes skinned to each) as plain data: version 1 for one
+    armature, version 2 for several."""
     import bpy
 
     scene = scene or bpy.context.scene
     armatures = [o for o in scene.objects if o.type == "ARMATURE"]
-    if len(armatures) != 1:
-        raise ValueError(f"expected one armature in scene {scene.name!r}, found {len(armatures)}")
-    arm = armatures[0]
+    if not armatures:
+        raise ValueError(f"no armature in scene {scene.name!r}")
+    subjects = [_dump_subject(bpy, scene, arm) for arm in armatures]
+    materials = {}
+    for subject in subjects:
+        for mesh in subject["meshes"]:
+            for name in mesh["materials"]:
+                if name and name not in materials:
+                    materials[name] = dump_material(bpy.data.materials[name])
+    head = {"format": FORMAT, "version": VERSION if len(subjects) == 1 else SEVERAL_VERSION,
+            "saved_by_blender": bpy.app.version_string,
+            "scene": {"fps": int(scene.render.fps), "fps_base": float(scene.render.fps_base),
+                      "frame_start": int(scene.frame_start), "frame_end": int(scene.frame_end)}}
+    if len(subjects) == 1:
+        return {**head, **subjects[0], "materials": list(materials.values())}
+    return {**head, "subjects": subjects, "materials": list(materials.values())}
+
+
+def subjects_of(data):
+    """[{"armature", "meshes"}] of a loaded source of either version."""
+    return data["subjects"] if "subjects" in data else [{"armature": data["armature"], "meshes": data["meshes"]}]
+
+
+def _dump_subject(bpy, scene, arm):
     bones = []
     for bone in arm.data.bones:  # parents come before their children
         _axis, roll = bpy.types.Bone.AxisRollFromMatrix(bone.matrix_local.to_3x3(),
@@ -127,17 +152,9 @@ def dump(scene=None):
         })
     if not meshes:
         raise ValueError(f"no mesh in scene {scene.name!r} is skinned to {arm.name!r}")
-    materials = {}
-    for mesh in meshes:
-        for name in mesh["materials"]:
-            if name and name not in materials:
-                materials[name] = dump_material(bpy.data.materials[name])
-    return {"format": FORMAT, "version": VERSION, "saved_by_blender": bpy.app.version_string,
-            "scene": {"fps": int(scene.render.fps), "fps_base": float(scene.render.fps_base),
-                      "frame_start": int(scene.frame_start), "frame_end": int(scene.frame_end)},
-            "armature": {"object": arm.name, "data": arm.data.name, "transform": _transform(arm),
+    return {"armature": {"object": arm.name, "data": arm.data.name, "transform": _transform(arm),
                          "display_type": arm.data.display_type, "bones": bones, "pose": pose},
-            "meshes": meshes, "materials": list(materials.values())}
+            "meshes": meshes}
 
 
 def _dump_constraint(c):
@@ -158,8 +175,8 @@ def save_source(data, path):
 def load_source(path):
     with gzip.open(path, "rt", encoding="utf-8") as fh:
         data = json.load(fh)
-    if data.get("format") != FORMAT or data.get("version") != VERSION:
-        raise ValueError(f"{path} is not a portable subject (format {FORMAT} version {VERSION})")
+    if data.get("format") != FORMAT or data.get("version") not in (VERSION, SEVERAL_VERSION):
+        raise ValueError(f"{path} is not a portable subject (format {FORMAT} version {VERSION} or {SEVERAL_VERSION})")
     return data
 
 
@@ -222,19 +239,29 @@ def _socket(sockets, identifier, index):
 
 
 def build(data, scene=None):
-    """Create the subject described by `data` in the (empty) scene; returns the armature object."""
+    """Create the subjects described by `data` in the (empty) scene; returns the (first) armature object."""
     import bpy
-    from mathutils import Matrix
 
     scene = scene or bpy.context.scene
     scene.render.fps, scene.render.fps_base = data["scene"]["fps"], data["scene"]["fps_base"]
     scene.frame_start, scene.frame_end = data["scene"]["frame_start"], data["scene"]["frame_end"]
-    a = data["armature"]
+    view_layer = scene.view_layers[0]
+    materials, first = None, None
+    for subject in subjects_of(data):
+        arm = _build_armature(bpy, scene, view_layer, subject["armature"])
+        if materials is None:  # after the first armature, as version 1 always built them
+            materials = {m["name"]: _build_material(bpy, m) for m in data["materials"]}
+        _build_meshes(bpy, scene, subject["meshes"], materials)
+        first = first or arm
+    view_layer.objects.active = None
+    return first
+
+
+def _build_armature(bpy, scene, view_layer, a):
     arm_data = bpy.data.armatures.new(a["data"])
     arm_data.display_type = a["display_type"]
     arm = bpy.data.objects.new(a["object"], arm_data)
     scene.collection.objects.link(arm)
-    view_layer = scene.view_layers[0]
     view_layer.objects.active = arm
     with bpy.context.temp_override(scene=scene, view_layer=view_layer, active_object=arm, object=arm,
                                    selected_objects=[arm], selected_editable_objects=[arm]):
@@ -261,8 +288,13 @@ def build(data, scene=None):
             for key, value in c.items():
                 if key not in ("type", "name") and hasattr(con, key):
                     setattr(con, key, value)
-    materials = {m["name"]: _build_material(bpy, m) for m in data["materials"]}
-    for m in data["meshes"]:
+    return arm
+
+
+def _build_meshes(bpy, scene, meshes, materials):
+    from mathutils import Matrix
+
+    for m in meshes:
         me = bpy.data.meshes.new(m["mesh"])
         me.from_pydata(m["vertices"], [], m["faces"])
         for name in m["materials"]:
@@ -287,8 +319,6 @@ def build(data, scene=None):
             obj.parent_type = m["parent_type"]
         obj.matrix_parent_inverse = Matrix(m["matrix_parent_inverse"])
         _apply_transform(obj, m["transform"])
-    view_layer.objects.active = None
-    return arm
 
 
 def main(argv):
