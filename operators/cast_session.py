@@ -47,7 +47,8 @@ def actor_folder_name(name):
 
 
 class CastSession:
-    def __init__(self, scene, armatures, capture_dir, out_dir, **options):
+    def __init__(self, scene, armatures, capture_dir, out_dir, actors=None, **options):
+        """`actors`: per armature an actor calibration (core/actor/actor_file.load_actor's dict) or None."""
         names = [a.name for a in armatures]
         if len(armatures) < 2:
             raise CastError("several actors need at least two armatures; track one with the usual command")
@@ -59,9 +60,9 @@ class CastSession:
         self.folders = folders
         self.sessions = []
         try:
-            for armature, folder in zip(armatures, folders):
+            for armature, folder, actor in zip(armatures, folders, actors or [None] * len(armatures)):
                 self.sessions.append(TrackSession(scene, armature, capture_dir, self.out / ACTORS_FOLDER / folder,
-                                                  **options))
+                                                  actor=actor, **options))
         except Exception:
             self.close()
             raise

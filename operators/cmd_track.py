@@ -243,14 +243,21 @@ def run_cast(args, scene, names, choice):
     from .failures import USER_ERRORS, cli_failure
 
     try:
-        if args.calibrate or args.actor is not None:
-            raise CastError("--calibrate and --actor track one actor: calibrate each actor with `calibrate "
-                            "--armature NAME` and track them together without them, or track each on its own")
+        if args.actor is not None or args.calibrate_measured:
+            raise CastError("--actor and --calibrate-measured are one actor's: with several armatures use --calibrate "
+                            "(each actor is fitted on its own), or track each actor on its own")
         armatures = [find_armature(scene, name) for name in names]
+        actors = None
+        if args.calibrate:  # each actor fitted as one alone, into its own result folder
+            from .cast_session import ACTORS_FOLDER, actor_folder_name
+
+            actors = [load_actor_option(argparse.Namespace(**{**vars(args), "out": args.out / ACTORS_FOLDER /
+                                                                actor_folder_name(a.name)}), scene, a, choice.used)
+                      for a in armatures]
         cast = CastSession(scene, armatures, args.capture, args.out, settings=settings_from_args(args, choice.used),
                            frames=parse_frames(args.frames), resume=args.resume,
                            log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), smooth_hz=args.smooth,
-                           foot_lock=args.foot_lock, foot_lock_speed=args.foot_lock_speed)
+                           foot_lock=args.foot_lock, foot_lock_speed=args.foot_lock_speed, actors=actors)
     except USER_ERRORS as exc:
         return cli_failure("track", exc)
     print(f"likelihood backend: {choice.used} ({choice.reason}); {len(armatures)} actors: {', '.join(names)}",

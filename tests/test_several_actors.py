@@ -168,7 +168,7 @@ def test_track_with_two_armatures_keys_each_on_its_own_person(tmp_path, capsys):
         assert np.all(np.linalg.norm(hips - theirs, axis=1) > 0.3)
 
 
-def test_several_actors_refuse_a_calibration_and_names_that_share_a_folder(tmp_path, capsys):
+def test_several_actors_refuse_one_actors_calibration_and_names_that_share_a_folder(tmp_path, capsys):
     pytest.importorskip("bpy")
     from scene_helpers import scene_dir
 
@@ -177,9 +177,10 @@ def test_several_actors_refuse_a_calibration_and_names_that_share_a_folder(tmp_p
 
     duet = scene_dir("duet")
     code = main(["track", "--scene", str(duet / "subject.blend"), "--capture", str(duet), "--out",
-                 str(tmp_path / "o"), "--frames", "0-2", "--armature", "Lead", "--armature", "Partner", "--calibrate"])
+                 str(tmp_path / "o"), "--frames", "0-2", "--armature", "Lead", "--armature", "Partner",
+                 "--calibrate-measured", "height=1.7"])
     assert code == 2
-    assert "--calibrate and --actor track one actor" in capsys.readouterr().err
+    assert "--actor and --calibrate-measured are one actor's" in capsys.readouterr().err
     assert not (tmp_path / "o" / "actors").exists()
     assert actor_folder_name("Lead/1") == actor_folder_name("Lead:1") == "Lead_1"
     assert actor_folder_name("..") == "armature"
