@@ -5,8 +5,8 @@ Given the others' poses, the silhouette of all actors together does not depend o
 body is (that pixel is a body pixel whoever is in front), so those pixels count for nothing in this actor's
 silhouette and edge terms (core/render/reference.py, OTHERS) and offer no contour to its local fit. A landmark the
 single-person model put nearer another actor's point than this actor's predicted one is not this actor's; a view
-whose landmarks mostly went to others is a view where the two cannot be told apart this frame, and counts for
-nothing in this actor's image terms that frame (docs/how-it-tracks.md, "Several actors").
+whose landmarks mostly went to others is a view where the two cannot be told apart this frame, and loses all its
+landmarks (docs/how-it-tracks.md, "Several actors"; docs/defaults.md, "Several actors: a shared view").
 """
 from dataclasses import dataclass
 
@@ -19,7 +19,8 @@ from ..render import project_views, rasterize
 # The others' bodies are marked this many energy pixels wider than rendered: their estimate is a couple of
 # centimetres off, and a rim of theirs left unmarked would read as this actor's evidence [DESIGN].
 OTHERS_MARGIN_PX = 2
-# A view whose landmarks (by weight) are more than this share nearer another actor's is that actor's view [DESIGN].
+# A view whose landmarks (by weight) are more than this share nearer another actor's is that actor's view [DESIGN]
+# (docs/defaults.md, "Several actors: a shared view").
 VIEW_TAKEN_SHARE = 0.5
 
 

@@ -168,14 +168,12 @@ class Tracker:
         self.observation = observation if observation is not None else self.observer.observe(frame, guide_poses)
         feats = self.observation.features
         self.energy.set_frame(feats, self.evidence)
-        shared = self._set_apart_others(frame, guide_poses)
+        self._set_apart_others(frame, guide_poses)
         predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
         targets = self.energy.targets
         self.views_in_play = views_in_play(
             self.capture.cameras, predicted, self.evidence, silhouette_area=targets.observed_count,
             person_area=self.energy.reference_area, picture_area=np.multiply(targets.widths, targets.heights))
-        if shared.any() and (self.views_in_play & ~shared).any():
-            self.views_in_play &= ~shared
         self.energy.set_view_weights(self.views_in_play.astype(np.float64))
         if not self.views_in_play.all():
             self.views_left_out[int(frame)] = [c.name for c, keep in zip(self.capture.cameras, self.views_in_play)
@@ -187,13 +185,14 @@ class Tracker:
         self.others = others if others else None
 
     def _set_apart_others(self, frame, guide_poses):
-        """Mark the other actors' bodies in the energy's targets and drop the landmarks that are theirs; returns
-        (C,) bool, the views whose evidence was another actor's (they are left out of the image terms)."""
+        """Mark the other actors' bodies in the energy's targets and drop the landmarks that are theirs; a view
+        whose landmarks mostly were loses all of them this frame (views_shared), its silhouettes still count with the
+        others set apart (docs/defaults.md, "Several actors: a shared view")."""
         from .other_actors import associate_landmarks
 
         shared = np.zeros(len(self.capture.cameras), dtype=bool)
         if self.others is None:
-            return shared
+            return
         energy = self.energy
         energy.targets = energy.targets.with_others(self.others.masks(energy.cameras, energy.targets.silhouette.shape))
         if energy.keypoints is not None:
@@ -202,7 +201,6 @@ class Tracker:
                 energy.keypoints, own, self.others.landmark_points(self.capture.cameras), energy.rig_points.swap)
         if shared.any():
             self.views_shared[int(frame)] = [c.name for c, s in zip(self.capture.cameras, shared) if s]
-        return shared
 
     def _plan_next(self, frame, guide, observe):
         """Place the next frame's crops around `guide` (absolute poses), and observe that frame in the worker
