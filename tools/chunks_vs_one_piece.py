@@ -1,0 +1,80 @@
+"""A take tracked in chunks against the same take in one piece (docs/batch.md, "Measured"): for each seed, one
+`batch` of the sample scenes with ground truth cut into chunks of --chunk-frames, and one with a single chunk per
+take (so both are stitched, smoothed and foot-locked alike); then the 15-joint error of each against the truth.
+
+    .venv/bin/python tools/chunks_vs_one_piece.py --out DIR [--scenes walk,busy] [--seeds 0,1,2] [--chunk-frames 30]
+
+Finished chunks are reused, so a rerun after an interruption continues. Prints a table and writes DIR/figures.json.
+"""
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SCENES = ("walk", "playground", "busy", "dusk", "lobby")
+
+
+def takes_file(path, scenes, seed):
+    lines = []
+    for scene in scenes:
+        folder = REPO / "sample_scenes" / scene
+        lines += ["[[take]]", f'name = "{scene}"', f'scene = "{folder / "subject.blend"}"',
+                  f'capture = "{folder}"', f"seed = {seed}", ""]
+    path.write_text("\n".join(lines))
+    return path
+
+
+def mean_error(result, scene, file="joints.npz"):
+    from markerless_mocap.core.results.evaluation import joint_indices
+    from markerless_mocap.core.results.result_folder import load_joints
+
+    names, frames, solved = load_joints(result / file)
+    gt_names, gt_frames, truth = load_joints(REPO / "sample_scenes" / scene / "gt_joints.npz")
+    at = {int(f): i for i, f in enumerate(gt_frames)}
+    mine, theirs = joint_indices(names, "the result"), joint_indices(gt_names, "the truth")
+    rows = [at[int(f)] for f in frames]
+    return float(np.linalg.norm(solved[:, mine] - truth[rows][:, theirs], axis=-1).mean() * 1e3)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument("--chunk-frames", type=int, default=30)
+    ap.add_argument("--workers", type=int, default=1)
+    args = ap.parse_args(argv)
+    scenes, seeds = args.scenes.split(","), [int(s) for s in args.seeds.split(",")]
+    args.out.mkdir(parents=True, exist_ok=True)
+    saved = args.out / "figures.json"
+    figures = json.loads(saved.read_text()) if saved.is_file() else {}  # other seeds' runs into the same folder
+    for seed in seeds:
+        takes = takes_file(args.out / f"takes_seed{seed}.toml", scenes, seed)
+        for how, chunk in (("one_piece", 100000), ("chunks", args.chunk_frames)):
+            out = args.out / f"seed{seed}_{how}"
+            cmd = [sys.executable, "-m", "markerless_mocap", "batch", str(takes), "--out", str(out),
+                   "--chunk-frames", str(chunk), "--workers", str(args.workers), "--no-overlays", "--no-export"]
+            print(" ".join(cmd), file=sys.stderr, flush=True)
+            subprocess.run(cmd, check=True)
+            for scene in scenes:
+                row = figures.setdefault(f"{scene} seed {seed}", {})
+                row[how] = mean_error(out / scene, scene)
+                row[f"{how}_as_solved"] = mean_error(out / scene, scene, "joints_raw.npz")
+                if how == "chunks":
+                    report = json.loads((out / scene / "report.json").read_text())
+                    row["overlap_mean_joint_mm"] = report.get("batch", {}).get("overlap_mean_joint_mm")
+        saved.write_text(json.dumps(figures, indent=1))
+    print(f"{'take':<20} {'one piece':>10} {'chunks':>8} {'diff':>6} {'overlap':>8}   (mm, smoothed and foot-locked)")
+    for take, row in figures.items():
+        overlap = row.get("overlap_mean_joint_mm")
+        print(f"{take:<20} {row['one_piece']:>10.2f} {row['chunks']:>8.2f} {row['chunks'] - row['one_piece']:>+6.2f} "
+              f"{'' if overlap is None else f'{overlap:.2f}':>8}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
