@@ -218,3 +218,16 @@ def test_track_panel_with_every_armature_keys_both(addon_module_name, bpy_module
         assert (tmp_path / "out" / "actors" / name / "joints.npz").is_file()
     assert (tmp_path / "out" / "tracked.blend").is_file()
     assert (tmp_path / "out" / "overlay" / "cam1.mp4").is_file()
+
+
+def test_the_other_actors_masks_fast_path_covers_the_reference_rasterisers_pixels():
+    from markerless_mocap.core.tracking import other_actors
+
+    verts, faces, labels, cams, a_true, b_true = _two_bodies_scene()
+    uv, z = render.project_views(np.array([a_true, b_true]), cams)
+    for p in range(2):
+        for c, cam in enumerate(cams):
+            fast_mask = other_actors._drawn(uv[p, c], z[p, c], faces, cam.width, cam.height)
+            reference_mask = reference.rasterize(uv[p, c], z[p, c], faces, labels, cam.width, cam.height) > 0
+            assert reference_mask.sum() > 50
+            assert (fast_mask != reference_mask).sum() <= 0.01 * reference_mask.sum()  # ties on triangle edges

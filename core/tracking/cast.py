@@ -22,5 +22,5 @@ def others_of(trackers, i, frame):
     for j, tracker in enumerate(trackers):
         pose = None if j == i else pose_for_frame(tracker, frame)
         if pose is not None:
-            actors.append(OtherActor(tracker.body, tracker.proxy, pose))
+            actors.append(OtherActor(tracker.body, tracker.proxy, pose, tracker.energy.rig_points))
     return OtherActors(actors) if actors else None

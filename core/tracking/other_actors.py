@@ -29,6 +29,17 @@ class OtherActor:
     body: object
     proxy: object
     pose: np.ndarray  # absolute pose this frame: solved, or predicted when not solved yet
+    rig_points: object = None  # its landmarks' rig points (core/evidence/keypoints.rig_keypoints), made if None
+
+
+def _drawn(uv, z, faces, width, height):
+    """(H,W) bool: the pixel centres one posed mesh covers; numba's kernel when it imports (50 times faster here,
+    the same pixels but for ties on a triangle's edge), else the reference rasteriser."""
+    try:
+        from ..render import fast
+    except ImportError:
+        return rasterize(uv, z, faces, np.ones(len(faces), dtype=np.int16), width, height) > 0
+    return fast.coverage(uv, z, faces, width, height)
 
 
 class OtherActors:
@@ -54,9 +65,8 @@ class OtherActors:
         for vertices, actor in zip(self._vertices, self.actors):
             uv, z = project_views(vertices[None], cameras)
             faces = np.asarray(actor.proxy.faces, dtype=np.int64)
-            labels = np.ones(len(faces), dtype=np.int16)
             for c, cam in enumerate(cameras):
-                drawn = rasterize(uv[0, c], z[0, c], faces, labels, cam.width, cam.height) > 0
+                drawn = _drawn(uv[0, c], z[0, c], faces, cam.width, cam.height)
                 if kernel is not None:
                     drawn = cv2.dilate(drawn.astype(np.uint8), kernel) > 0
                 out[c, :cam.height, :cam.width] |= drawn
@@ -67,7 +77,8 @@ class OtherActors:
         """(A,C,K,2) capture pixels of each other actor's landmark rig points."""
         out = []
         for actor in self.actors:
-            points = rig_keypoints(actor.body).world(actor.body, np.atleast_2d(actor.pose))[0]
+            rig = actor.rig_points if actor.rig_points is not None else rig_keypoints(actor.body)
+            points = rig.world(actor.body, np.atleast_2d(actor.pose))[0]
             out.append(np.stack([cam.project(points) for cam in cameras]))
         return np.stack(out)
 
