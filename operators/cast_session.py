@@ -53,9 +53,11 @@ class CastSession:
         if len(armatures) < 2:
             raise CastError("several actors need at least two armatures; track one with the usual command")
         folders = [actor_folder_name(n) for n in names]
+        if len(set(names)) != len(names):
+            raise CastError(f"an armature is given twice ({', '.join(names)}): name each actor's armature once")
         if len(set(folders)) != len(folders):
-            raise CastError(f"the armatures {names} do not have distinct names: rename them (each actor's result "
-                            "folder is named after its armature)")
+            raise CastError(f"the armatures {names} give the same result folder name: rename them (each actor's "
+                            "result folder is named after its armature)")
         self.out = require_writable_folder(out_dir)
         self.folders = folders
         self.sessions = []
@@ -68,6 +70,7 @@ class CastSession:
             raise
         frames = {tuple(s.frames) for s in self.sessions}
         if len(frames) != 1:  # a resumed cast whose actors stopped at different frames
+            self.close()
             raise CastError("the actors' result folders hold different frames: resume them with the same --frames "
                             "or start a new result folder")
         self.write_report()

@@ -181,6 +181,9 @@ def test_several_actors_refuse_one_actors_calibration_and_names_that_share_a_fol
                  "--calibrate-measured", "height=1.7"])
     assert code == 2
     assert "--actor and --calibrate-measured are one actor's" in capsys.readouterr().err
+    code = main(["track", "--scene", str(duet / "subject.blend"), "--capture", str(duet), "--out",
+                 str(tmp_path / "o"), "--frames", "0-2", "--armature", "Lead", "--armature", "Lead"])
+    assert code == 2 and "an armature is given twice (Lead, Lead)" in capsys.readouterr().err
     assert not (tmp_path / "o" / "actors").exists()
     assert actor_folder_name("Lead/1") == actor_folder_name("Lead:1") == "Lead_1"
     assert actor_folder_name("..") == "armature"
