@@ -26,7 +26,7 @@ from ..core.batch.progress import (CANCEL_FILE, cancel_requested, progress_lines
 from ..core.tracking.options import CHOICE_NAMES
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
-from .cmd_track import add_foot_lock_options, add_tracking_options
+from .cmd_track import add_foot_lock_options, add_tracking_options, foot_lock_args
 from .failures import EXIT_INPUT as EXIT_USER_ERROR
 
 EXIT_SOME_FAILED = 1
@@ -279,7 +279,7 @@ class Batch:
         a = self.args
         argv = [*self.local_command, "stitch", *self._take_args(run, lambda p: str(Path(p).resolve())),
                 *self._plan_args(run), "--out", str(a.out / run.take.name), "--smooth", str(a.smooth)]
-        argv += ["--foot-lock" if a.foot_lock else "--no-foot-lock", "--foot-lock-speed", str(a.foot_lock_speed)]
+        argv += foot_lock_args(a.foot_lock, a.foot_lock_speed)
         return argv + (["--no-export"] if a.no_export else []) + (["--no-overlays"] if a.no_overlays else [])
 
     # ---- the loop

@@ -12,8 +12,9 @@ the local fit; `lsilh+edge+kp`) tracked from the ground truth's pose on --pipeli
 capture; ratios against the NumPy reference.
 Ends with one JSON line: reference_s, fast_s, ratio, fk_lbs_s, diffusion_vga_s, poses, views, resolution, backend,
 ..., and per backend `numpy`, `fast`, `gpu` ({evaluations_per_s, likelihood_s_per_frame, pipeline_s_per_frame,
-*_vs_numpy}), `auto_backend`, `default_s_per_frame` (the default pipeline on the backend auto picks) and
-`preview_s_per_frame` (the preview preset's pipeline on that backend).
+*_vs_numpy}), `auto_backend`, `default_s_per_frame` (the default pipeline on the backend auto picks),
+`preview_s_per_frame` (the preview preset's pipeline on that backend) and, with --two-actors, `two_actors`
+(operators/bench_cast.py; null without).
 """
 import json
 import os

@@ -77,6 +77,11 @@ def add_arguments(p):
     add_tracking_options(p)
 
 
+def foot_lock_args(on, speed):
+    """The command line's words for foot locking (add_foot_lock_options), for a command started elsewhere."""
+    return ["--foot-lock" if on else "--no-foot-lock", "--foot-lock-speed", f"{speed:g}"]
+
+
 def add_foot_lock_options(p):
     p.add_argument("--foot-lock", action=argparse.BooleanOptionalAction, default=True,
                    help="pin the finished take's planted feet to the floor by refitting the legs (default: on); the "

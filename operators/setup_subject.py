@@ -23,14 +23,18 @@ def subject_armature(context):
     return props.armature
 
 
+def several_actors(context):
+    """The scene's armatures (by name) when the Subject panel says to track every one and there are several,
+    else an empty list."""
+    if not context.scene.mocap.every_armature:
+        return []
+    armatures = sorted((o for o in context.scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
+    return armatures if len(armatures) > 1 else []
+
+
 def subject_armatures(context):
-    """The armatures Track solves: every armature of the scene (by name) when the Subject panel says so and
-    there are several, else the one of `subject_armature`."""
-    if context.scene.mocap.every_armature:
-        armatures = sorted((o for o in context.scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
-        if len(armatures) > 1:
-            return armatures
-    return [subject_armature(context)]
+    """The armatures Track solves: the several actors' (several_actors), else the one of `subject_armature`."""
+    return several_actors(context) or [subject_armature(context)]
 
 
 def check_subject(context):

@@ -359,8 +359,9 @@ class MOCAP_OT_track(bpy.types.Operator):
         if context.scene.mocap.run_on != "this":  # chunks on local processes or a cluster: track_batch.py
             from .track_batch import start
 
-            if context.scene.mocap.every_armature and \
-                    sum(o.type == "ARMATURE" for o in context.scene.objects) > 1:
+            from .setup_subject import several_actors
+
+            if several_actors(context):
                 context.scene.mocap.last_error = ("Several actors run on this Blender only: set 'Run on' to This "
                                                   "Blender, or untick 'Track Every Armature'")
                 self.report({"ERROR"}, context.scene.mocap.last_error)

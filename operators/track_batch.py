@@ -140,6 +140,7 @@ def start(operator, context):
     """Send the take(s) and start polling; the operator's result."""
     from ..core.batch.progress import FILE_NAME
     from .cmd_batch import launch_batch
+    from .cmd_track import foot_lock_args
     from .failures import user_message
     from .setup_subject import subject_armature
     from .track import output_folder
@@ -166,8 +167,8 @@ def start(operator, context):
             workers=(props.local_workers or None) if props.run_on == "local" else None,
             scheduler=props.scheduler_address.strip() if props.run_on == "cluster" else None,
             chunk_frames=props.chunk_frames, command=worker_command(), settings=tracking_choices(props),
-            extra_args=["--smooth", f"{props.smoothing_hz:g}", "--foot-lock" if props.foot_lock else "--no-foot-lock",
-                        "--foot-lock-speed", f"{props.foot_lock_speed:g}", *_cluster_args(props)])
+            extra_args=["--smooth", f"{props.smoothing_hz:g}", *foot_lock_args(props.foot_lock, props.foot_lock_speed),
+                        *_cluster_args(props)])
     except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
         props.last_error = user_message(exc, "Sending the take")
         operator.report({"ERROR"}, props.last_error)

@@ -67,7 +67,7 @@ class OverlayWriter:
         each camera drawn first."""
         for c, cam in enumerate(self.cameras):
             img = images[cam.name]
-            depth = [float(np.mean((cam.R @ np.asarray(b[0]).T)[2] + cam.t[2])) for b in bodies]
+            depth = [float(cam.to_camera(b[0])[:, 2].mean()) for b in bodies]
             for i in np.argsort(depth)[::-1]:
                 vertices, faces, face_part, colours = bodies[i]
                 img = draw_body(img, cam, vertices, faces, face_part, colours)

@@ -190,15 +190,15 @@ class Tracker:
         others set apart (docs/defaults.md, "Several actors: a shared view")."""
         from .other_actors import associate_landmarks
 
-        shared = np.zeros(len(self.capture.cameras), dtype=bool)
         if self.others is None:
             return
         energy = self.energy
         energy.targets = energy.targets.with_others(self.others.masks(energy.cameras, energy.targets.silhouette.shape))
-        if energy.keypoints is not None:
-            own = energy.project_rig_points(np.atleast_2d(guide_poses)[-1:])[0]
-            energy.keypoints, shared = associate_landmarks(
-                energy.keypoints, own, self.others.landmark_points(self.capture.cameras), energy.rig_points.swap)
+        if energy.keypoints is None:
+            return
+        own = energy.project_rig_points(np.atleast_2d(guide_poses)[-1:])[0]
+        energy.keypoints, shared = associate_landmarks(
+            energy.keypoints, own, self.others.landmark_points(self.capture.cameras), energy.rig_points.swap)
         if shared.any():
             self.views_shared[int(frame)] = [c.name for c, s in zip(self.capture.cameras, shared) if s]
 
