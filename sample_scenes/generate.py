@@ -379,6 +379,31 @@ SCENES["duet"] = dict(
                  turn=(28, 18, 120), proportions=SCENES["actor3"]["proportions"], proportions_from="actor3",
                  colours={"shirt": (0.045, 0.12, 0.05), "trousers": (0.14, 0.11, 0.07), "hair": (0.1, 0.06, 0.03)}),
     handshake=dict(first_frame=45, frames_in=6, above_hips_m=0.18))
+# issue 44 (a shoot day on a cluster): a long uncontrolled take for chunked `batch` tracking and its wall time.
+# 01_01 is the only clip long enough (688 frames at 30 fps): source frames 40-639 jump forward 3.3 m, turn round,
+# jump back, turn round again and jump on; arm gestures keyed on top every 60-70 frames. Playground's kind of room
+# (no plates, light drifting over the take) but low sensor noise, so that 600 frames stay small; no second person
+# (it would double the render). The cameras stand 4.0-4.5 m from the middle of the path, two of them near its ends
+# (the person comes within 2.3 m of them), with wider lenses than elsewhere, so every joint stays in every view.
+# Its frames are kept under the scene folder until the videos are encoded: the render takes hours and resumes.
+SCENES["long"] = dict(
+    bvh="01_01.bvh", start=40, n_frames=600, seed=4444, uncontrolled=True, calibration="toml",
+    noise=2.0, blur=0.5, resumable=True,
+    cameras=[
+        (20, 4.5, 1.65, 600, (4.0, -3.0), 0.6),
+        (98, 4.0, 1.40, 440, (-5.0, 2.5), -0.9),
+        (200, 4.3, 1.85, 540, (3.0, 5.0), 1.1),
+        (282, 4.2, 1.50, 470, (-2.5, -4.5), -0.4)],
+    colours={"shirt": (0.1, 0.12, 0.045), "trousers": (0.045, 0.04, 0.06)},
+    gestures=[(18, 6, 10, 6, {"Right": "face"}),
+              (85, 8, 12, 6, {"Left": "overhead"}),
+              (150, 6, 14, 6, {"Left": "cross", "Right": "cross"}),
+              (215, 5, 10, 5, {"Right": "shoulder"}),
+              (285, 6, 12, 6, {"Left": "belly", "Right": "face"}),
+              (350, 8, 10, 6, {"Right": "overhead", "Left": "shoulder"}),
+              (420, 5, 12, 5, {"Left": "face"}),
+              (490, 6, 10, 6, {"Right": "belly"}),
+              (555, 6, 12, 6, {"Left": "overhead", "Right": "overhead"})])
 MASK_FRAMES = 5
 
 
@@ -1016,18 +1041,42 @@ def setup_cycles(samples, size):
 
 
 def render_views(cam_objs, out_dir, frames):
-    """Render every camera over `frames` into out_dir/<cam>/<frame:04d>.png."""
+    """Render every camera over `frames` into out_dir/<cam>/<frame:04d>.png. A frame whose image is already
+    there and readable is kept, so a render that was stopped continues where it stopped."""
     scene = bpy.context.scene
     for ob in cam_objs:
         scene.camera = ob
         d = out_dir / ob.name
         d.mkdir(parents=True, exist_ok=True)
+        # written beside the camera's folder and renamed when complete: a killed render leaves no half image
+        # among the frames (encode_video reads every PNG in the folder)
+        part = out_dir / f"{ob.name}.part.png"
         t0 = time.time()
-        for f in frames:
+        done = 0
+        todo = [f for f in frames if not (d / f"{f:04d}.png").exists() or cv2.imread(str(d / f"{f:04d}.png")) is None]
+        if len(todo) < len(frames):
+            log(f"  {ob.name}: {len(frames) - len(todo)} of {len(frames)} frames already rendered, kept")
+        for f in todo:
             scene.frame_set(f + 1)
-            scene.render.filepath = str(d / f"{f:04d}.png")
+            scene.render.filepath = str(part)
             bpy.ops.render.render(write_still=True)
-        log(f"  {ob.name}: {len(frames)} frames in {time.time() - t0:.1f} s")
+            part.replace(d / f"{f:04d}.png")
+            done += 1
+            if done % 50 == 0 and done < len(todo):
+                log(f"  {ob.name}: {done} of {len(todo)} frames, {(time.time() - t0) / done:.2f} s per frame")
+        log(f"  {ob.name}: {done} frames in {time.time() - t0:.1f} s")
+
+
+def resume_or_clear(frames_dir, settings):
+    """A resumable scene's frame folder: kept if it was rendered with the same settings (scene, samples, size,
+    frame count, cameras, scene configuration), emptied otherwise, so a changed scene never mixes frames."""
+    stamp = frames_dir / "settings.json"
+    text = json.dumps(settings, indent=1, sort_keys=True, default=str)
+    if frames_dir.exists() and (not stamp.exists() or stamp.read_text() != text):
+        log(f"  {frames_dir}: rendered with other settings, starting over")
+        shutil.rmtree(frames_dir)
+    frames_dir.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(text)
 
 
 def post_process(img, rng, noise_sigma, blur_sigma):
@@ -1304,7 +1353,13 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
     mask_frames = np.linspace(0, F - 1, MASK_FRAMES).round().astype(int).tolist()
     shutil.rmtree(out / "gt_masks", ignore_errors=True)
     if render:
-        tmp = Path(tempfile.mkdtemp(prefix=f"render_{name}_"))
+        if cfg.get("resumable"):   # kept until the videos are encoded: a stopped render resumes on the next run
+            tmp = out / "_frames"
+            resume_or_clear(tmp, dict(scene=name, samples=samples, quick=quick, n_frames=F, cameras=records,
+                                      config=cfg))
+        else:
+            tmp = Path(tempfile.mkdtemp(prefix=f"render_{name}_"))
+        finished = False
         try:
             log(f"[{name}] rendering {len(cams)} cameras x {F} frames, {samples} samples")
             render_views(cam_objs, tmp / "frames", list(range(F)))
@@ -1330,8 +1385,10 @@ def build_scene(name, data_dir, out_root, samples, quick, render):
             (out / "preview").mkdir(exist_ok=True)
             for ob in cam_objs:
                 shutil.copy(keep / ob.name / f"{mask_frames[2]:04d}.png", out / "preview" / f"{ob.name}.png")
+            finished = True
         finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+            if finished or not cfg.get("resumable"):   # a resumable scene keeps its frames until the videos are written
+                shutil.rmtree(tmp, ignore_errors=True)
     render_masks(cam_objs, body, out / "gt_masks", mask_frames)
     if partner is not None:
         shutil.rmtree(out / f"gt_masks_{partner['name']}", ignore_errors=True)
