@@ -217,6 +217,14 @@ run_in blender -b "$src/sample_scenes/duet/subject.blend" --python-exit-code 1 \
   > "$out/two_actors.log" 2>&1 || fail "tracking two actors from the Track panel failed; see $out/two_actors.log"
 grep '^STAGE two' "$out/two_actors.log" | sed 's/^STAGE/[stage]/'
 
+# 4c. a take sent to local processes from the Track panel (Run On: Local Processes), keyed when the batch ends
+t1=$(date +%s)
+run_in blender -b "$src/sample_scenes/walk/subject.blend" --python-exit-code 1 \
+  --python "$src/tests/real_blender/cluster_take.py" -- "$src/sample_scenes/walk" /mnt/out/cluster_take \
+  > "$out/cluster_take.log" 2>&1 || fail "a take sent to local processes from the Track panel failed; see $out/cluster_take.log"
+grep '^STAGE cluster' "$out/cluster_take.log" | sed 's/^STAGE/[stage]/'
+log "the take on local processes took $(( $(date +%s) - t1 )) s"
+
 # 5. the UI under Xvfb: Import, Check, Calibrate Actor (modal), Track (modal), Esc, Resume twice, Export, with screenshots
 start_xvfb
 log "UI on Xvfb :$display: Import, Check, Calibrate, Track (modal), Esc, Resume, Resume at 3 Hz, Export"
