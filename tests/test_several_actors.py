@@ -234,3 +234,23 @@ def test_the_other_actors_masks_fast_path_covers_the_reference_rasterisers_pixel
             reference_mask = reference.rasterize(uv[p, c], z[p, c], faces, labels, cam.width, cam.height) > 0
             assert reference_mask.sum() > 50
             assert (fast_mask != reference_mask).sum() <= 0.01 * reference_mask.sum()  # ties on triangle edges
+
+
+def test_where_two_hands_meet_the_landmark_stays_with_both_actors():
+    """A handshake: one wrist landmark a pixel from the other actor's hand and 3 px from this actor's predicted
+    wrist is kept for both (the other's nearer point does not take it); 40 px away from this actor's it is the
+    other's."""
+    from markerless_mocap.core.tracking.other_actors import closer_to_others
+
+    own = np.zeros((1, 2, 2))
+    own[0, 1] = [100.0, 100.0]                      # this actor's predicted wrist (point 1); point 0 far away
+    other = np.full((1, 1, 2, 2), 1000.0)
+    other[0, 0, 1] = [102.0, 100.0]                 # the other actor's hand, two pixels on
+    swap = np.array([0, 1])
+    near = np.zeros((1, 2, 2))
+    near[0, 1] = [103.0, 100.0]
+    assert not closer_to_others(near, own, other, swap, own_tolerance=[16.0])[0, 1]
+    assert closer_to_others(near, own, other, swap)[0, 1]  # without the tolerance the other takes it
+    far_own = own.copy()
+    far_own[0, 1] = [60.0, 100.0]
+    assert closer_to_others(near, far_own, other, swap, own_tolerance=[16.0])[0, 1]
