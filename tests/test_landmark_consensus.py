@@ -5,29 +5,17 @@ import pytest
 
 pytest.importorskip("bpy")
 
-from scene_helpers import ground_truth_poses, mean_joint_error, scene_dir  # noqa: E402
+from scene_helpers import mean_joint_error, walk_with_another_person  # noqa: E402
 
-from markerless_mocap.core.capture.capture import load_capture  # noqa: E402
 from markerless_mocap.core.evidence.keypoint_fit import pose_from_keypoints  # noqa: E402
-from markerless_mocap.core.evidence.keypoints import KeypointTargets, rig_keypoints  # noqa: E402
+from markerless_mocap.core.evidence.keypoints import KeypointTargets  # noqa: E402
 from markerless_mocap.core.evidence.landmark_consensus import disagreeing_landmarks, set_aside_disagreeing  # noqa: E402
 from markerless_mocap.core.evidence.learned import CROP_MARGIN  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def walk():
-    body, _, poses, _ = ground_truth_poses("walk")
-    cameras = load_capture(scene_dir("walk")).cameras
-    rig = rig_keypoints(body)
-    truth, predicted = poses[30], poses[29]  # the actor, and where its tracker expects it
-    other = poses[12].copy()
-    other[body.translation_dofs[:2]] = truth[body.translation_dofs[:2]] + [0.45, 0.25]  # another person close by
-
-    def points(pose):
-        world = rig.world(body, pose[None])[0]
-        return np.stack([cam.project(world) for cam in cameras])
-
-    return body, cameras, rig, truth, predicted, points, points(other)
+    return walk_with_another_person()
 
 
 def _targets(uv, n_views, n_points):

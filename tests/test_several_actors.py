@@ -94,27 +94,15 @@ def test_another_actors_landmarks_in_one_view_do_not_move_the_fit():
     """The single-person landmark model put the other actor's landmarks in view 0 (the crop shared by both) and one
     wrist of view 1 on the other's: set apart, the fit equals the fit on the clean landmarks alone; kept, it moves."""
     pytest.importorskip("bpy")
-    from scene_helpers import ground_truth_poses, mean_joint_error, scene_dir
+    from scene_helpers import mean_joint_error, walk_with_another_person
 
-    from markerless_mocap.core.capture.capture import load_capture
     from markerless_mocap.core.evidence.keypoint_fit import pose_from_keypoints
-    from markerless_mocap.core.evidence.keypoints import KeypointTargets, rig_keypoints
+    from markerless_mocap.core.evidence.keypoints import KeypointTargets
     from markerless_mocap.core.evidence.learned import CROP_MARGIN
     from markerless_mocap.core.tracking.other_actors import associate_landmarks
 
-    body, _, poses, _ = ground_truth_poses("walk")
-    cameras = load_capture(scene_dir("walk")).cameras
-    rig = rig_keypoints(body)
-    truth, predicted = poses[30], poses[29]  # the actor, and where its tracker expects it
-    other = poses[12].copy()
-    other[body.translation_dofs[:2]] = truth[body.translation_dofs[:2]] + [0.45, 0.25]  # another person close by
-
-    def points(pose):
-        world = rig.world(body, pose[None])[0]
-        return np.stack([cam.project(world) for cam in cameras])
-
+    body, cameras, rig, truth, predicted, points, theirs = walk_with_another_person()
     uv = points(truth)
-    theirs = points(other)
     uv[0] = theirs[0]
     wrist = int(np.nonzero(rig.landmarks == 15)[0][0])  # the left wrist's rig point
     uv[1, wrist] = theirs[1, wrist]
