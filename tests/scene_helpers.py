@@ -64,3 +64,24 @@ def mean_joint_error(body, poses, truth_poses):
     a = body.joint_positions(np.atleast_2d(poses))
     b = body.joint_positions(np.atleast_2d(truth_poses))
     return float(np.linalg.norm(a - b, axis=-1).mean())
+
+
+def walk_with_another_person():
+    """Walk's actor at frame 30, where its tracker expects it (frame 29), and another person close by (frame 12's
+    pose 0.45 m / 0.25 m away): (body, cameras, rig points, truth, predicted, points(pose) -> (C,K,2) capture pixels
+    of the rig points, the other person's (C,K,2))."""
+    from markerless_mocap.core.capture.capture import load_capture
+    from markerless_mocap.core.evidence.keypoints import rig_keypoints
+
+    body, _, poses, _ = ground_truth_poses("walk")
+    cameras = load_capture(scene_dir("walk")).cameras
+    rig = rig_keypoints(body)
+    truth, predicted = poses[30], poses[29]
+    other = poses[12].copy()
+    other[body.translation_dofs[:2]] = truth[body.translation_dofs[:2]] + [0.45, 0.25]
+
+    def points(pose):
+        world = rig.world(body, pose[None])[0]
+        return np.stack([cam.project(world) for cam in cameras])
+
+    return body, cameras, rig, truth, predicted, points, points(other)

@@ -94,27 +94,15 @@ def test_another_actors_landmarks_in_one_view_do_not_move_the_fit():
     """The single-person landmark model put the other actor's landmarks in view 0 (the crop shared by both) and one
     wrist of view 1 on the other's: set apart, the fit equals the fit on the clean landmarks alone; kept, it moves."""
     pytest.importorskip("bpy")
-    from scene_helpers import ground_truth_poses, mean_joint_error, scene_dir
+    from scene_helpers import mean_joint_error, walk_with_another_person
 
-    from markerless_mocap.core.capture.capture import load_capture
     from markerless_mocap.core.evidence.keypoint_fit import pose_from_keypoints
-    from markerless_mocap.core.evidence.keypoints import KeypointTargets, rig_keypoints
+    from markerless_mocap.core.evidence.keypoints import KeypointTargets
     from markerless_mocap.core.evidence.learned import CROP_MARGIN
     from markerless_mocap.core.tracking.other_actors import associate_landmarks
 
-    body, _, poses, _ = ground_truth_poses("walk")
-    cameras = load_capture(scene_dir("walk")).cameras
-    rig = rig_keypoints(body)
-    truth, predicted = poses[30], poses[29]  # the actor, and where its tracker expects it
-    other = poses[12].copy()
-    other[body.translation_dofs[:2]] = truth[body.translation_dofs[:2]] + [0.45, 0.25]  # another person close by
-
-    def points(pose):
-        world = rig.world(body, pose[None])[0]
-        return np.stack([cam.project(world) for cam in cameras])
-
+    body, cameras, rig, truth, predicted, points, theirs = walk_with_another_person()
     uv = points(truth)
-    theirs = points(other)
     uv[0] = theirs[0]
     wrist = int(np.nonzero(rig.landmarks == 15)[0][0])  # the left wrist's rig point
     uv[1, wrist] = theirs[1, wrist]
@@ -234,3 +222,23 @@ def test_the_other_actors_masks_fast_path_covers_the_reference_rasterisers_pixel
             reference_mask = reference.rasterize(uv[p, c], z[p, c], faces, labels, cam.width, cam.height) > 0
             assert reference_mask.sum() > 50
             assert (fast_mask != reference_mask).sum() <= 0.01 * reference_mask.sum()  # ties on triangle edges
+
+
+def test_where_two_hands_meet_the_landmark_stays_with_both_actors():
+    """A handshake: one wrist landmark a pixel from the other actor's hand and 3 px from this actor's predicted
+    wrist is kept for both (the other's nearer point does not take it); 40 px away from this actor's it is the
+    other's."""
+    from markerless_mocap.core.tracking.other_actors import closer_to_others
+
+    own = np.zeros((1, 2, 2))
+    own[0, 1] = [100.0, 100.0]                      # this actor's predicted wrist (point 1); point 0 far away
+    other = np.full((1, 1, 2, 2), 1000.0)
+    other[0, 0, 1] = [102.0, 100.0]                 # the other actor's hand, two pixels on
+    swap = np.array([0, 1])
+    near = np.zeros((1, 2, 2))
+    near[0, 1] = [103.0, 100.0]
+    assert not closer_to_others(near, own, other, swap, own_tolerance=[16.0])[0, 1]
+    assert closer_to_others(near, own, other, swap)[0, 1]  # without the tolerance the other takes it
+    far_own = own.copy()
+    far_own[0, 1] = [60.0, 100.0]
+    assert closer_to_others(near, far_own, other, swap, own_tolerance=[16.0])[0, 1]

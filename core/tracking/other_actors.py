@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from ..evidence.keypoints import rig_keypoints
+from ..evidence.landmark_consensus import AGREE_SHARE
 from ..render import project_views, rasterize
 
 # The others' bodies are marked this many energy pixels wider than rendered: their estimate is a couple of
@@ -83,20 +84,27 @@ class OtherActors:
         return np.stack(out)
 
 
-def closer_to_others(landmarks, own, others, swap):
+def closer_to_others(landmarks, own, others, swap, own_tolerance=None):
     """(C,K) bool: landmarks (C,K,2) nearer one of the others' points (A,C,K,2) than this actor's (C,K,2); each
-    compared with the point it stands for and its mirror (single-view models swap sides)."""
+    compared with the point it stands for and its mirror (single-view models swap sides). A landmark within
+    own_tolerance (C,) pixels of this actor's point stays this actor's: where two hands meet (a handshake) it is
+    both actors' evidence."""
     def nearest(points):  # (..., C, K, 2) -> (..., C, K) distance to point k or its mirror
         d = np.linalg.norm(points - landmarks, axis=-1)
         return np.minimum(d, np.linalg.norm(points[..., swap, :] - landmarks, axis=-1))
 
-    return nearest(np.asarray(others)).min(axis=0) < nearest(np.asarray(own))
+    mine = nearest(np.asarray(own))
+    theirs = nearest(np.asarray(others)).min(axis=0) < mine
+    if own_tolerance is not None:
+        theirs &= mine > np.asarray(own_tolerance, dtype=np.float64)[:, None]
+    return theirs
 
 
 def associate_landmarks(targets, own, others, swap, taken_share=VIEW_TAKEN_SHARE):
     """KeypointTargets without the landmarks that are other actors', and (C,) bool: the views whose landmarks
     mostly were (those lose all of theirs). `own`: (C,K,2) this actor's predicted points."""
-    theirs = closer_to_others(targets.uv, own, others, swap) & (targets.weight > 0)
+    tolerance = AGREE_SHARE * np.asarray(targets.person_px, dtype=np.float64)
+    theirs = closer_to_others(targets.uv, own, others, swap, tolerance) & (targets.weight > 0)
     total = targets.weight.sum(axis=1)
     share = np.divide((targets.weight * theirs).sum(axis=1), total, out=np.zeros_like(total), where=total > 0)
     taken = share > taken_share

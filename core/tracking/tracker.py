@@ -85,6 +85,7 @@ class Tracker:
         self.estimates = []
         self.others = None  # the other tracked actors this frame (other_actors.OtherActors), or None
         self.views_shared = {}  # {frame: [camera names]} whose evidence was another actor's
+        self.landmarks_set_aside = {}  # {frame: {camera name: landmarks}} the other views disagreed with
 
     def _optimizer_kwargs(self):
         s = self.settings
@@ -169,6 +170,7 @@ class Tracker:
         feats = self.observation.features
         self.energy.set_frame(feats, self.evidence)
         self._set_apart_others(frame, guide_poses)
+        self._set_aside_disagreeing(frame, guide_poses)
         predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
         targets = self.energy.targets
         self.views_in_play = views_in_play(
@@ -201,6 +203,25 @@ class Tracker:
             energy.keypoints, own, self.others.landmark_points(self.capture.cameras), energy.rig_points.swap)
         if shared.any():
             self.views_shared[int(frame)] = [c.name for c, s in zip(self.capture.cameras, shared) if s]
+
+    def _set_aside_disagreeing(self, frame, guide_poses):
+        """Drop the landmarks the other views (and the prediction) disagree with: another person's, given by the
+        landmark model where that person stands in front of this actor; a view that loses most of its landmarks'
+        weight so loses all of them this frame (views_shared)."""
+        from ..evidence.landmark_consensus import set_aside_disagreeing
+
+        energy = self.energy
+        if energy.keypoints is None:
+            return
+        predicted = energy.rig_points.world(self.body, np.atleast_2d(guide_poses)[-1:])[0]
+        energy.keypoints, aside, taken = set_aside_disagreeing(
+            self.capture.cameras, energy.keypoints, energy.rig_points.swap, predicted)
+        names = [c.name for c in self.capture.cameras]
+        if aside.any():
+            self.landmarks_set_aside[int(frame)] = {n: int(k) for n, k in zip(names, aside.sum(axis=1)) if k}
+        if taken.any():
+            shared = set(self.views_shared.get(int(frame), [])) | {n for n, t in zip(names, taken) if t}
+            self.views_shared[int(frame)] = [n for n in names if n in shared]
 
     def _plan_next(self, frame, guide, observe):
         """Place the next frame's crops around `guide` (absolute poses), and observe that frame in the worker
