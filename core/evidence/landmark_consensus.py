@@ -17,6 +17,7 @@ AGREE_SHARE = 0.06
 # the predicted point supports a proposal within this distance (metres): it breaks a tie of two views against two
 PREDICTION_SUPPORT_M = 0.25
 # a view that loses more than this share of its landmarks' weight loses all of them: the rest is that person's too
+# [DESIGN] (docs/defaults.md, "Several actors: a shared view")
 VIEW_TAKEN_SHARE = 0.5
 # a landmark is judged only when its winner has this many votes (views agreeing, plus the prediction's)
 MIN_VOTES = 3
@@ -72,12 +73,19 @@ def disagreeing_landmarks(cameras, uv, weight, person_px, swap, predicted=None, 
     return out & (weight > 0)
 
 
+def without_landmarks(targets, out, taken_share=VIEW_TAKEN_SHARE):
+    """KeypointTargets without the landmarks `out` (C,K) marks, and (C,) bool the views that lost more than
+    `taken_share` of their weight so: those lose all of theirs (someone else holds that view's crop)."""
+    total = targets.weight.sum(axis=1)
+    share = np.divide((targets.weight * out).sum(axis=1), total, out=np.zeros_like(total), where=total > 0)
+    taken = share > taken_share
+    weight = np.where(out | taken[:, None], 0.0, targets.weight)
+    return type(targets)(targets.uv, weight, targets.person_px, targets.alt_uv, targets.alt_cost), taken
+
+
 def set_aside_disagreeing(cameras, targets, swap, predicted=None):
     """KeypointTargets without the landmarks the views disagree with, (C,K) bool which, and (C,) bool the views
     that lost most of their weight so (those lose all of theirs)."""
     out = disagreeing_landmarks(cameras, targets.uv, targets.weight, targets.person_px, swap, predicted)
-    total = targets.weight.sum(axis=1)
-    share = np.divide((targets.weight * out).sum(axis=1), total, out=np.zeros_like(total), where=total > 0)
-    taken = share > VIEW_TAKEN_SHARE
-    weight = np.where(out | taken[:, None], 0.0, targets.weight)
-    return type(targets)(targets.uv, weight, targets.person_px, targets.alt_uv, targets.alt_cost), out, taken
+    kept, taken = without_landmarks(targets, out)
+    return kept, out, taken

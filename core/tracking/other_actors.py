@@ -14,15 +14,12 @@ import cv2
 import numpy as np
 
 from ..evidence.keypoints import rig_keypoints
-from ..evidence.landmark_consensus import AGREE_SHARE
+from ..evidence.landmark_consensus import AGREE_SHARE, without_landmarks
 from ..render import project_views, rasterize
 
 # The others' bodies are marked this many energy pixels wider than rendered: their estimate is a couple of
 # centimetres off, and a rim of theirs left unmarked would read as this actor's evidence [DESIGN].
 OTHERS_MARGIN_PX = 2
-# A view whose landmarks (by weight) are more than this share nearer another actor's is that actor's view [DESIGN]
-# (docs/defaults.md, "Several actors: a shared view").
-VIEW_TAKEN_SHARE = 0.5
 
 
 @dataclass
@@ -100,13 +97,9 @@ def closer_to_others(landmarks, own, others, swap, own_tolerance=None):
     return theirs
 
 
-def associate_landmarks(targets, own, others, swap, taken_share=VIEW_TAKEN_SHARE):
+def associate_landmarks(targets, own, others, swap):
     """KeypointTargets without the landmarks that are other actors', and (C,) bool: the views whose landmarks
     mostly were (those lose all of theirs). `own`: (C,K,2) this actor's predicted points."""
     tolerance = AGREE_SHARE * np.asarray(targets.person_px, dtype=np.float64)
     theirs = closer_to_others(targets.uv, own, others, swap, tolerance) & (targets.weight > 0)
-    total = targets.weight.sum(axis=1)
-    share = np.divide((targets.weight * theirs).sum(axis=1), total, out=np.zeros_like(total), where=total > 0)
-    taken = share > taken_share
-    weight = np.where(theirs | taken[:, None], 0.0, targets.weight)
-    return type(targets)(targets.uv, weight, targets.person_px, targets.alt_uv, targets.alt_cost), taken
+    return without_landmarks(targets, theirs)
