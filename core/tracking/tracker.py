@@ -32,6 +32,14 @@ from .settings import FrameEstimate, TrackingSettings
 NEXT = object()  # Tracker.track's default next frame: the one after
 
 
+def _record(per_frame, frame, value):
+    """Keep `value` for `frame` in a report's per-frame record, or drop the frame's entry when it is empty."""
+    if value:
+        per_frame[int(frame)] = value
+    else:
+        per_frame.pop(int(frame), None)
+
+
 class Tracker:
     """Tracks one subject through a capture. Call `initialise` once, then `track(frame)` per frame; `state()` is
     what a checkpoint keeps, `restore(state)` continues from it."""
@@ -169,8 +177,12 @@ class Tracker:
         self.observation = observation if observation is not None else self.observer.observe(frame, guide_poses)
         feats = self.observation.features
         self.energy.set_frame(feats, self.evidence)
-        self._set_apart_others(frame, guide_poses)
-        self._set_aside_disagreeing(frame, guide_poses)
+        apart = self._set_apart_others(guide_poses)
+        aside, taken = self._set_aside_disagreeing(guide_poses)
+        names = [c.name for c in self.capture.cameras]
+        # this frame's last observation decides (the first frame is observed twice: rough placement, then fitted)
+        _record(self.views_shared, frame, [n for n, s in zip(names, apart | taken) if s])
+        _record(self.landmarks_set_aside, frame, {n: int(k) for n, k in zip(names, aside) if k})
         predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
         targets = self.energy.targets
         self.views_in_play = views_in_play(
@@ -186,42 +198,38 @@ class Tracker:
         """The other tracked actors for the next frame solved (other_actors.OtherActors; None: alone)."""
         self.others = others if others else None
 
-    def _set_apart_others(self, frame, guide_poses):
+    def _set_apart_others(self, guide_poses):
         """Mark the other actors' bodies in the energy's targets and drop the landmarks that are theirs; a view
-        whose landmarks mostly were loses all of them this frame (views_shared), its silhouettes still count with the
-        others set apart (docs/defaults.md, "Several actors: a shared view")."""
+        whose landmarks mostly were loses all of them this frame, its silhouettes still count with the others set
+        apart (docs/defaults.md, "Several actors: a shared view"). Returns (C,) bool: those views."""
         from .other_actors import associate_landmarks
 
+        shared = np.zeros(len(self.capture.cameras), dtype=bool)
         if self.others is None:
-            return
+            return shared
         energy = self.energy
         energy.targets = energy.targets.with_others(self.others.masks(energy.cameras, energy.targets.silhouette.shape))
         if energy.keypoints is None:
-            return
+            return shared
         own = energy.project_rig_points(np.atleast_2d(guide_poses)[-1:])[0]
         energy.keypoints, shared = associate_landmarks(
             energy.keypoints, own, self.others.landmark_points(self.capture.cameras), energy.rig_points.swap)
-        if shared.any():
-            self.views_shared[int(frame)] = [c.name for c, s in zip(self.capture.cameras, shared) if s]
+        return shared
 
-    def _set_aside_disagreeing(self, frame, guide_poses):
+    def _set_aside_disagreeing(self, guide_poses):
         """Drop the landmarks the other views (and the prediction) disagree with: another person's, given by the
         landmark model where that person stands in front of this actor; a view that loses most of its landmarks'
-        weight so loses all of them this frame (views_shared)."""
+        weight so loses all of them this frame. Returns (C,) landmarks set aside per view, (C,) bool those views."""
         from ..evidence.landmark_consensus import set_aside_disagreeing
 
         energy = self.energy
         if energy.keypoints is None:
-            return
+            n = len(self.capture.cameras)
+            return np.zeros(n, dtype=int), np.zeros(n, dtype=bool)
         predicted = energy.rig_points.world(self.body, np.atleast_2d(guide_poses)[-1:])[0]
         energy.keypoints, aside, taken = set_aside_disagreeing(
             self.capture.cameras, energy.keypoints, energy.rig_points.swap, predicted)
-        names = [c.name for c in self.capture.cameras]
-        if aside.any():
-            self.landmarks_set_aside[int(frame)] = {n: int(k) for n, k in zip(names, aside.sum(axis=1)) if k}
-        if taken.any():
-            shared = set(self.views_shared.get(int(frame), [])) | {n for n, t in zip(names, taken) if t}
-            self.views_shared[int(frame)] = [n for n in names if n in shared]
+        return aside.sum(axis=1), taken
 
     def _plan_next(self, frame, guide, observe):
         """Place the next frame's crops around `guide` (absolute poses), and observe that frame in the worker
