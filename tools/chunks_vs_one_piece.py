@@ -3,13 +3,18 @@
 take (so both are stitched, smoothed and foot-locked alike); then the 15-joint error of each against the truth.
 
     .venv/bin/python tools/chunks_vs_one_piece.py --out DIR [--scenes walk,busy] [--seeds 0,1,2] [--chunk-frames 30]
+                                                  [--workers 1] [--chunk-workers 2]
 
-Finished chunks are reused, so a rerun after an interruption continues. Prints a table and writes DIR/figures.json.
+The one-piece batch runs on --workers processes, the chunked one on --chunk-workers (default: the same), so the
+long take's scaling (one process against two) comes out of the same runs, with each batch's wall time.
+Finished chunks are reused, so a rerun after an interruption continues (its wall time then counts only what was
+left). Prints a table and writes DIR/figures.json.
 """
 import argparse
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +52,7 @@ def main(argv=None):
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--chunk-frames", type=int, default=30)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--chunk-workers", type=int, default=None)
     args = ap.parse_args(argv)
     scenes, seeds = args.scenes.split(","), [int(s) for s in args.seeds.split(",")]
     args.out.mkdir(parents=True, exist_ok=True)
@@ -54,25 +60,32 @@ def main(argv=None):
     figures = json.loads(saved.read_text()) if saved.is_file() else {}  # other seeds' runs into the same folder
     for seed in seeds:
         takes = takes_file(args.out / f"takes_seed{seed}.toml", scenes, seed)
-        for how, chunk in (("one_piece", 100000), ("chunks", args.chunk_frames)):
+        chunk_workers = args.workers if args.chunk_workers is None else args.chunk_workers
+        for how, chunk, workers in (("one_piece", 100000, args.workers), ("chunks", args.chunk_frames, chunk_workers)):
             out = args.out / f"seed{seed}_{how}"
             cmd = [sys.executable, "-m", "markerless_mocap", "batch", str(takes), "--out", str(out),
-                   "--chunk-frames", str(chunk), "--workers", str(args.workers), "--no-overlays", "--no-export"]
+                   "--chunk-frames", str(chunk), "--workers", str(workers), "--no-overlays", "--no-export"]
             print(" ".join(cmd), file=sys.stderr, flush=True)
+            started = time.monotonic()
             subprocess.run(cmd, check=True)
+            wall_s = time.monotonic() - started
             for scene in scenes:
                 row = figures.setdefault(f"{scene} seed {seed}", {})
+                row[f"{how}_wall_s_whole_batch"] = round(wall_s, 1)
+                row[f"{how}_workers"] = workers
                 row[how] = mean_error(out / scene, scene)
                 row[f"{how}_as_solved"] = mean_error(out / scene, scene, "joints_raw.npz")
                 if how == "chunks":
                     report = json.loads((out / scene / "report.json").read_text())
                     row["overlap_mean_joint_mm"] = report.get("batch", {}).get("overlap_mean_joint_mm")
         saved.write_text(json.dumps(figures, indent=1))
-    print(f"{'take':<20} {'one piece':>10} {'chunks':>8} {'diff':>6} {'overlap':>8}   (mm, smoothed and foot-locked)")
+    print(f"{'take':<20} {'one piece':>10} {'chunks':>8} {'diff':>6} {'overlap':>8}   (mm, smoothed and foot-locked)"
+          "   wall s of the whole batch: one piece / chunks")
     for take, row in figures.items():
         overlap = row.get("overlap_mean_joint_mm")
+        walls = [row.get(f"{how}_wall_s_whole_batch") for how in ("one_piece", "chunks")]
         print(f"{take:<20} {row['one_piece']:>10.2f} {row['chunks']:>8.2f} {row['chunks'] - row['one_piece']:>+6.2f} "
-              f"{'' if overlap is None else f'{overlap:.2f}':>8}")
+              f"{'' if overlap is None else f'{overlap:.2f}':>8}   {walls[0]} / {walls[1]}")
     return 0
 
 
