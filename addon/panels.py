@@ -78,12 +78,22 @@ class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
 def _draw_armature(layout, props, context):
     """The Armature field, and while it is empty the armature tracking will use: the scene's only one, or a
     request to pick one when there are several (tracking would stop there), or all of them as several actors."""
-    armatures = [o.name for o in context.scene.objects if o.type == "ARMATURE"]
+    objects = sorted((o for o in context.scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
+    armatures = [o.name for o in objects]
     if len(armatures) > 1:
         layout.prop(props, "every_armature")
         if props.every_armature:
-            _wrapped(layout, f"Tracks {len(armatures)} actors at once: {', '.join(sorted(armatures))}", context,
-                     icon="COMMUNITY")
+            column = layout.column(align=True)
+            for ob in objects:   # which armatures are actors: a character only receiving motion is unticked
+                column.prop(ob, "mocap_actor", text=ob.name)
+            actors = [o.name for o in objects if o.mocap_actor]
+            if len(actors) > 1:
+                _wrapped(layout, f"Tracks {len(actors)} actors at once: {', '.join(actors)}", context,
+                         icon="COMMUNITY")
+            elif actors:
+                layout.label(text=f"Tracks {actors[0]} alone", icon="ARMATURE_DATA")
+            else:
+                _wrapped(layout, "No armature ticked: tick the actors to track", context, icon="ERROR", alert=True)
             return
     if props.armature is not None:
         layout.prop(props, "armature")

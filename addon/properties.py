@@ -106,8 +106,8 @@ class MocapSettings(bpy.types.PropertyGroup):
                               description="The rigged character to track (a mesh must be skinned to it)")
     every_armature: BoolProperty(
         name="Track Every Armature", default=False,
-        description="Several actors: track every armature of the scene at once, each placed roughly on its own "
-                    "person; each is keyed and exported on its own (in the output folder's actors/<armature>/)")
+        description="Several actors: track the scene's armatures ticked below at once, each placed roughly on its "
+                    "own person; each is keyed and exported on its own (in the output folder's actors/<armature>/)")
     subject_checked: BoolProperty(name="Checked", default=False, description="The rig check has run")
     subject_dofs: IntProperty(name="DOF", default=0, description="Degrees of freedom the tracker will solve")
     subject_preset: StringProperty(name="Preset", description="Rig naming the bones were matched with")
@@ -256,6 +256,10 @@ def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.mocap = PointerProperty(type=MocapSettings)
+    bpy.types.Object.mocap_actor = BoolProperty(
+        name="Track", default=True,
+        description="With 'Track Every Armature': track this armature as one of the actors (untick a character "
+                    "that is only there to receive the motion)")
     bpy.app.handlers.load_post.append(reset_run_state)
 
 
@@ -263,5 +267,6 @@ def unregister():
     if reset_run_state in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(reset_run_state)
     del bpy.types.Scene.mocap
+    del bpy.types.Object.mocap_actor
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -23,18 +23,31 @@ def subject_armature(context):
     return props.armature
 
 
-def several_actors(context):
-    """The scene's armatures (by name) when the Subject panel says to track every one and there are several,
-    else an empty list."""
-    if not context.scene.mocap.every_armature:
-        return []
+def ticked_actors(context):
+    """With 'Track Every Armature' and several armatures in the scene: those ticked as actors (by name), else None."""
     armatures = sorted((o for o in context.scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
-    return armatures if len(armatures) > 1 else []
+    if not context.scene.mocap.every_armature or len(armatures) < 2:
+        return None
+    return [o for o in armatures if o.mocap_actor]
+
+
+def several_actors(context):
+    """The armatures ticked as actors when the Subject panel says to track several and more than one is, else []."""
+    actors = ticked_actors(context) or []
+    return actors if len(actors) > 1 else []
 
 
 def subject_armatures(context):
-    """The armatures Track solves: the several actors' (several_actors), else the one of `subject_armature`."""
-    return several_actors(context) or [subject_armature(context)]
+    """The armatures Track solves: the several actors', the one ticked, else the one of `subject_armature`."""
+    actors = ticked_actors(context)
+    if actors is None:
+        return [subject_armature(context)]
+    if not actors:
+        from ..addon.scene_bridge import SubjectError
+
+        raise SubjectError("'Track Every Armature' is on but no armature is ticked as an actor: tick the actors to "
+                           "track in the Subject panel")
+    return actors
 
 
 def check_subject(context):

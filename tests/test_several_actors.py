@@ -194,7 +194,19 @@ def test_track_panel_with_every_armature_keys_both(addon_module_name, bpy_module
     m.every_armature = True
     text = " ".join(_labels(_draw_all(bpy, panels=("MOCAP_PT_subject",))))
     assert "Tracks 2 actors at once: Lead, Partner" in text and "pick the one" not in text
+    # each armature's tick says whether it is an actor (a character only receiving motion is unticked)
+    from markerless_mocap.operators.setup_subject import subject_armatures
+
+    objects = bpy.context.scene.objects
+    objects["Partner"].mocap_actor = False
+    assert "Tracks Lead alone" in " ".join(_labels(_draw_all(bpy, panels=("MOCAP_PT_subject",))))
+    assert [o.name for o in subject_armatures(bpy.context)] == ["Lead"]
+    objects["Lead"].mocap_actor = False
+    assert "No armature ticked" in " ".join(_labels(_draw_all(bpy, panels=("MOCAP_PT_subject",))))
     m.capture_dir = str(duet)
+    with pytest.raises(RuntimeError, match="no armature is ticked as an actor"):
+        bpy.ops.mocap.track()
+    objects["Lead"].mocap_actor = objects["Partner"].mocap_actor = True
     m.output_dir = str(tmp_path / "out")
     m.use_frame_range, m.frame_start, m.frame_end = True, 0, 1
     m.preset = "preview"
