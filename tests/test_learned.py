@@ -603,3 +603,24 @@ def test_landmark_offsets_table_is_what_the_measuring_tool_finds():
     for lm, expected in LANDMARK_OFFSETS.items():
         np.testing.assert_allclose(table[lm][0], expected, atol=0.01, err_msg=f"landmark {lm}")
 
+
+
+def test_triangulation_takes_a_landmark_not_found_in_a_view_as_missing(walk_truth):
+    """A view whose landmark has no pixels (NaN: not found there) leaves the triangulation as it is without that
+    view, whatever weight came with it; before, 0 x NaN poisoned the whole batch (SVD did not converge)."""
+    from markerless_mocap.core.evidence.keypoint_fit import triangulate
+
+    _, _, cameras, _ = walk_truth
+    points = np.array([[0.1, 0.2, 1.0], [-0.3, 0.1, 1.4]])
+    uv = np.stack([cam.project(points) for cam in cameras])           # (C,2,2)
+    weight = np.full(uv.shape[:2], 0.9)
+    clean, ok_clean = triangulate(cameras[1:], uv[1:], weight[1:])
+    for w0 in (0.0, 0.9):
+        lost = uv.copy()
+        lost[0, 0] = np.nan
+        w = weight.copy()
+        w[0, 0] = w0
+        X, ok = triangulate(cameras, lost, w)
+        assert ok.all() and np.isfinite(X).all()
+        np.testing.assert_allclose(X[0], clean[0], atol=1e-9)
+        np.testing.assert_allclose(X, points, atol=1e-6)

@@ -38,15 +38,16 @@ def _projections_and_ideal(cameras, uv):
 def _dlt(P, ideal, weight, min_weight):
     """All points' DLT systems in one batched SVD: P (C,3,4), ideal (undistorted) pixels (C,K,2), weight
     (C,K). A view under min_weight contributes zero rows, which leave the solution (the null space of
-    A^T A) as it is without them."""
-    w = np.where(weight >= min_weight, weight, 0.0)  # (C,K)
-    u, v = ideal[..., 0], ideal[..., 1]
+    A^T A) as it is without them. A landmark without pixels (NaN: not found in that view) counts as weightless."""
+    found = np.isfinite(ideal).all(axis=-1)
+    w = np.where((weight >= min_weight) & found, weight, 0.0)  # (C,K)
+    u, v = np.where(found, ideal[..., 0], 0.0), np.where(found, ideal[..., 1], 0.0)  # 0 x NaN would poison A
     row_u = w[..., None] * (u[..., None] * P[:, None, 2] - P[:, None, 0])  # (C,K,4)
     row_v = w[..., None] * (v[..., None] * P[:, None, 2] - P[:, None, 1])
     A = np.concatenate([row_u, row_v], axis=0).transpose(1, 0, 2)  # (K,2C,4)
     K = A.shape[0]
     X = np.full((K, 3), np.nan)
-    ok = (weight >= min_weight).sum(axis=0) >= 2
+    ok = (w > 0).sum(axis=0) >= 2
     if not ok.any():
         return X, ok
     h = np.linalg.svd(A[ok])[2][:, -1]  # (n,4)
