@@ -12,6 +12,7 @@ is reported with its reason and the others go on. DIR/batch-progress.json says w
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shlex
@@ -33,6 +34,7 @@ EXIT_SOME_FAILED = 1
 EXIT_CANCELLED = 130
 POLL_SECONDS = 1.0
 PRINT_SECONDS = 10.0  # on a non-terminal, a progress line at least this often while frames advance
+STITCHED_FILE = "stitched.json"  # beside a take's result: what it was stitched from (a rerun skips the same)
 
 
 def add_arguments(p):
@@ -230,6 +232,13 @@ class TakeRun:
         self.seed_future = None
 
 
+def _write_json(path, data):
+    from ..core.atomic_files import atomic_path
+
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(json.dumps(data, indent=1))
+
+
 def _partial_frames(path):
     """Frames solved so far by an unfinished chunk (its partial folders' report.json)."""
     best = 0
@@ -281,6 +290,13 @@ class Batch:
                 *self._plan_args(run), "--out", str(a.out / run.take.name), "--smooth", str(a.smooth)]
         argv += foot_lock_args(a.foot_lock, a.foot_lock_speed)
         return argv + (["--no-export"] if a.no_export else []) + (["--no-overlays"] if a.no_overlays else [])
+
+    def stitch_signature(self, run):
+        """What a take's stitch is made of: its command's words after the interpreter and each chunk's record. A
+        rerun whose signature equals the one saved beside the take's result skips the stitch."""
+        argv = self.stitch_argv(run)[len(self.local_command):]
+        chunks = [hashlib.sha256((f.path / "chunk.json").read_bytes()).hexdigest() for f in run.folders]
+        return {"argv": argv, "chunks": chunks}
 
     # ---- the loop
     def _submit_chunks(self, runner, run, first_only=False):
@@ -395,12 +411,18 @@ class Batch:
             run.stitch_log.close()
             if code == 0:
                 run.state = "done"
+                _write_json(self.args.out / run.take.name / STITCHED_FILE, self.stitch_signature(run))
             else:
                 text = Path(run.stitch_log.name).read_text(errors="replace").splitlines()
                 mine = [line for line in text if line.startswith("markerless_mocap")] or text[-1:]
                 run.fail(f"stitch: {mine[-1] if mine else f'exit code {code}'} (log: {run.stitch_log.name})")
         if any(r.state == "stitching" for r in self.runs):
             return  # one stitch at a time: each reads the footage for its overlays
+        for run in [r for r in self.runs if r.state == "waiting"]:
+            if self._stitched_already(run):   # the same chunks and settings as the result there: nothing to do
+                run.state = "done"
+                print(f"batch: take {run.take.name!r}: already stitched from these chunks with these settings; "
+                      f"{self.args.out / run.take.name} kept", file=sys.stderr, flush=True)
         waiting = [r for r in self.runs if r.state == "waiting"]
         if waiting:
             run = waiting[0]
@@ -410,6 +432,15 @@ class Batch:
             run.stitch = subprocess.Popen(self.stitch_argv(run), stdout=run.stitch_log, stderr=subprocess.STDOUT,
                                           stdin=subprocess.DEVNULL, env=command_environment())
             run.state = "stitching"
+
+    def _stitched_already(self, run):
+        out = self.args.out / run.take.name
+        try:
+            saved = json.loads((out / STITCHED_FILE).read_text())
+        except (OSError, ValueError):
+            return False
+        return (out / "report.json").is_file() and (out / "joints.npz").is_file() \
+            and saved == self.stitch_signature(run)
 
     def cancel(self):
         for run in self.runs:

@@ -7,6 +7,7 @@ from the truth by frame 11, so their distance measures nothing) on the walk's fr
 warm-up of 3 and an overlap of 2: two chunks, tracked 0-7 and 3-11."""
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -75,11 +76,24 @@ def test_the_batch_writes_the_take_and_a_rerun_tracks_nothing_again(local_batch)
     assert progress["total"]["chunks_done"] == progress["total"]["chunks_total"] == 2
     chunk_files = sorted((tmp / "out" / "_chunks" / "walk").glob("*/chunk.json"))
     before = [p.read_text() for p in chunk_files]
+    stitched = (out / "report.json").stat().st_mtime_ns
     t0 = time.perf_counter()
     again = _batch(takes, tmp / "out", "--workers", "1")
     assert again.returncode == 0, again.stderr[-3000:]
     assert [p.read_text() for p in chunk_files] == before  # the finished chunks were not tracked again
     assert time.perf_counter() - t0 < seconds
+    # nor stitched again: the same chunks and settings as the result already there
+    assert "already stitched" in again.stderr and (out / "report.json").stat().st_mtime_ns == stitched
+
+
+def test_a_rerun_with_other_stitch_settings_stitches_again(local_batch, tmp_path):
+    tmp, takes, _ = local_batch
+    shutil.copytree(tmp / "out", tmp_path / "out")
+    again = _batch(takes, tmp_path / "out", "--workers", "1", "--smooth", "5")
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "already stitched" not in again.stderr
+    report = json.loads((tmp_path / "out" / "walk" / "report.json").read_text())
+    assert report["smoothing"]["cutoff_hz"] == 5.0
 
 
 def test_chunks_stitched_equal_the_take_in_one_piece_within_the_bound(local_batch, tmp_path):
