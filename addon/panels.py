@@ -7,6 +7,7 @@ import textwrap
 import bpy
 
 from .properties import CAMERA_COLLECTION, MEASURED_SEGMENTS
+from .scene_bridge import scene_armatures, ticked_armatures
 
 CATEGORY = "Mocap"
 
@@ -78,7 +79,7 @@ class MOCAP_PT_subject(_MocapPanel, bpy.types.Panel):
 def _draw_armature(layout, props, context):
     """The Armature field, and while it is empty the armature tracking will use: the scene's only one, or a
     request to pick one when there are several (tracking would stop there), or all of them as several actors."""
-    objects = sorted((o for o in context.scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
+    objects = scene_armatures(context.scene)
     armatures = [o.name for o in objects]
     if len(armatures) > 1:
         layout.prop(props, "every_armature")
@@ -86,7 +87,7 @@ def _draw_armature(layout, props, context):
             column = layout.column(align=True)
             for ob in objects:   # which armatures are actors: a character only receiving motion is unticked
                 column.prop(ob, "mocap_actor", text=ob.name)
-            actors = [o.name for o in objects if o.mocap_actor]
+            actors = [o.name for o in ticked_armatures(context.scene)]
             if len(actors) > 1:
                 _wrapped(layout, f"Tracks {len(actors)} actors at once: {', '.join(actors)}", context,
                          icon="COMMUNITY")

@@ -14,6 +14,17 @@ class SubjectError(InputError):
     """The scene does not hold a usable armature + skinned mesh."""
 
 
+def scene_armatures(scene):
+    """The scene's armature objects, by name."""
+    return sorted((o for o in scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
+
+
+def ticked_armatures(scene):
+    """The scene's armatures ticked as actors (Object.mocap_actor: the Subject panel's tick under 'Track Every
+    Armature'), by name."""
+    return [o for o in scene_armatures(scene) if o.mocap_actor]
+
+
 def find_armature(scene, name=None):
     if name:
         obj = scene.objects.get(name)

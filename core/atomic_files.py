@@ -2,6 +2,7 @@
 renamed over the target in one step (os.replace is atomic on one file system), so a run killed or
 stopped by a full disk leaves the earlier version of every file, never half of a new one."""
 import contextlib
+import json
 import os
 from pathlib import Path
 
@@ -25,3 +26,9 @@ def atomic_path(path):
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def write_json(path, data):
+    """`data` as indented JSON at `path`, whole or not at all."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=1))

@@ -28,6 +28,7 @@ def cast_seconds(scene_dir, frames=6, seed=0):
     holds at least two armatures; the first two by name are timed): `frames` timed frames each."""
     import bpy
 
+    from ..addon.scene_bridge import scene_armatures
     from ..core.tracking.settings import TrackingSettings
     from .cast_session import CastError, CastSession
     from .track_session import TrackSession
@@ -35,7 +36,7 @@ def cast_seconds(scene_dir, frames=6, seed=0):
     scene_dir = Path(scene_dir)
     bpy.ops.wm.open_mainfile(filepath=str(scene_dir / "subject.blend"))
     scene = bpy.context.scene
-    armatures = sorted((o for o in scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)[:2]
+    armatures = scene_armatures(scene)[:2]
     if len(armatures) < 2:
         raise CastError(f"{scene_dir / 'subject.blend'} has fewer than two armatures: --two-actors needs a scene "
                         "with two, such as sample_scenes/duet")

@@ -5,12 +5,11 @@ layout (joints, poses, report, checkpoint, BVH, FBX, overlays), solved frame by 
 actor sees the others' bodies (core/tracking/cast.py). OUT/report.json lists the actors and their folders
 (docs/several-actors.md). Like TrackSession, `solve_next` is engine work; the rest runs on the main thread.
 """
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..core.atomic_files import atomic_path
+from ..core.atomic_files import atomic_path, write_json
 from ..core.errors import InputError
 from ..core.results.result_folder import require_writable_folder
 from ..core.tracking.cast import others_of
@@ -174,5 +173,4 @@ class CastSession:
                               "frames_solved": s.n_done} for s, folder in zip(self.sessions, self.folders)],
                   "capture": str(Path(self.sessions[0].capture_dir).resolve()),
                   "layout": "one single-actor result folder per armature under actors/ (docs/several-actors.md)"}
-        with atomic_path(self.out / "report.json") as tmp:
-            tmp.write_text(json.dumps(report, indent=1))
+        write_json(self.out / "report.json", report)

@@ -22,6 +22,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..core.atomic_files import write_json
 from ..core.batch.progress import (CANCEL_FILE, cancel_requested, progress_lines, read_progress, request_cancel,
                                    write_progress)
 from ..core.tracking.options import CHOICE_NAMES
@@ -232,13 +233,6 @@ class TakeRun:
         self.seed_future = None
 
 
-def _write_json(path, data):
-    from ..core.atomic_files import atomic_path
-
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(json.dumps(data, indent=1))
-
-
 def _partial_frames(path):
     """Frames solved so far by an unfinished chunk (its partial folders' report.json)."""
     best = 0
@@ -411,7 +405,7 @@ class Batch:
             run.stitch_log.close()
             if code == 0:
                 run.state = "done"
-                _write_json(self.args.out / run.take.name / STITCHED_FILE, self.stitch_signature(run))
+                write_json(self.args.out / run.take.name / STITCHED_FILE, self.stitch_signature(run))
             else:
                 text = Path(run.stitch_log.name).read_text(errors="replace").splitlines()
                 mine = [line for line in text if line.startswith("markerless_mocap")] or text[-1:]

@@ -25,10 +25,11 @@ def subject_armature(context):
 
 def ticked_actors(context):
     """With 'Track Every Armature' and several armatures in the scene: those ticked as actors (by name), else None."""
-    armatures = sorted((o for o in context.scene.objects if o.type == "ARMATURE"), key=lambda o: o.name)
-    if not context.scene.mocap.every_armature or len(armatures) < 2:
+    from ..addon.scene_bridge import scene_armatures, ticked_armatures
+
+    if not context.scene.mocap.every_armature or len(scene_armatures(context.scene)) < 2:
         return None
-    return [o for o in armatures if o.mocap_actor]
+    return ticked_armatures(context.scene)
 
 
 def several_actors(context):

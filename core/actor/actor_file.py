@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from ..atomic_files import atomic_path
+from ..atomic_files import write_json
 from .proportions import Proportions, ProportionsError, segment_lengths
 from .landmark_fit import proportions_for_lengths
 
@@ -36,8 +36,7 @@ def save_actor(path, fit, subject_name="", capture=""):
 def write_actor(path, data):
     """Write an actor calibration dict (as load_actor returns it) to `path`, atomically."""
     path = Path(path)
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(json.dumps(data, indent=1))
+    write_json(path, data)
     return path
 
 

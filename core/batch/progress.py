@@ -14,7 +14,7 @@ import json
 import time
 from pathlib import Path
 
-from ..atomic_files import atomic_path
+from ..atomic_files import write_json
 
 FILE_NAME = "batch-progress.json"
 CANCEL_FILE = "batch-cancel"  # its presence asks a running batch to stop
@@ -22,8 +22,7 @@ CANCEL_FILE = "batch-cancel"  # its presence asks a running batch to stop
 
 def write_progress(folder, progress):
     progress = {**progress, "updated": time.time()}
-    with atomic_path(Path(folder) / FILE_NAME) as tmp:
-        tmp.write_text(json.dumps(progress, indent=1))
+    write_json(Path(folder) / FILE_NAME, progress)
 
 
 def read_progress(folder):
