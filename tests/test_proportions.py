@@ -126,6 +126,22 @@ def test_lengths_carry_over_to_another_rig(walk):
         assert got[seg] == pytest.approx(target[seg], rel=2e-3), seg
 
 
+def test_a_calibration_that_kept_the_rig_tracks_the_rig_itself(walk, tmp_path):
+    """actor_body of a calibration whose every factor is 1 is the rig's own body (the take is then the uncalibrated
+    one to the last bit); any other calibration a scaled copy."""
+    from markerless_mocap.core.actor.actor_file import actor_body, load_actor, save_actor
+    from markerless_mocap.core.actor.landmark_fit import ProportionsFit
+
+    body, _ = walk
+    lengths = segment_lengths(body)
+    for proportions, is_rig in ((Proportions({k: 1.0 for k in ("forearm", "thigh")}, 1.0), True), (ACTOR, False)):
+        fit = ProportionsFit(proportions, segment_lengths(scaled_body(body, proportions)), lengths, [0, 1, 2], 0.02,
+                             0.01, np.zeros((3, body.n_dof)))
+        data = load_actor(save_actor(tmp_path / "actor.json", fit))
+        assert (actor_body(data, body) is body) == is_rig
+    assert segment_lengths(actor_body(data, body))["thigh"] == pytest.approx(0.95 * lengths["thigh"], rel=1e-9)
+
+
 def _synthetic_masks(actor, cameras, poses):
     """The actor's silhouettes (its mesh simplified to 8000 triangles, not the tracker's 2000) per frame and view."""
     from markerless_mocap.core import render

@@ -57,6 +57,11 @@ class Proportions:
     def uniform(cls, scale):
         return cls({}, scale)
 
+    @property
+    def is_identity(self):
+        """Every segment the subject's own length: the calibration kept the rig."""
+        return self.overall == 1.0 and all(v == 1.0 for v in self.factors.values())
+
 
 def _side_and_stem(role):
     if role[:2] in ("l_", "r_"):
