@@ -4,10 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.actor.frames import DEFAULT_FRAMES
 from .worker_job import WorkerJob
-
-DEFAULT_FRAMES = 20  # two thirds of a second at 30 fps. On the actor scene 10 frames left the upper arm 8 % long,
-                     # 20 frames 2.5 %, 40 frames 2 % (docs/actor-calibration.md)
 
 
 def calibration_frames(all_frames, count=DEFAULT_FRAMES):
@@ -50,7 +48,8 @@ def open_calibration(scene, armature, capture_dir, out_dir, settings=None, frame
 
 def require_enough_frames(frames, capture_dir):
     """Too few frames to calibrate on: the user's range (or a very short take), said before anything is tracked."""
-    from ..core.actor.landmark_fit import MIN_FRAMES, ProportionsFitError
+    from ..core.actor.frames import MIN_FRAMES
+    from ..core.actor.landmark_fit import ProportionsFitError
 
     if len(frames) < MIN_FRAMES:
         given = ("none" if not frames else f"1 (frame {frames[0]})" if len(frames) == 1

@@ -59,6 +59,9 @@ def add_arguments(p):
                    help="thread pools of each local chunk process (default: cores / workers)")
     p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
                    help=f"low-pass each stitched take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: as solved)")
+    p.add_argument("--no-calibrate", action="store_true",
+                   help="track the takes that do not say `calibrate = true` with the rig's proportions (by default a "
+                        "take of at least 20 frames without an `actor` is tracked with the actor's, fitted first)")
     p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
     p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
     add_foot_lock_options(p)
@@ -483,32 +486,62 @@ class Batch:
             self._printed = (key, now)
 
 
-def calibrate_takes(takes, out):
-    """Fit the actor of each take with `calibrate = true` whose DIR/<take>/actor.json is not there yet (a rerun
-    reuses it): one `calibrate` command per take on its first frames, here, one after the other, before any chunk
-    is planned (the chunks track with the fit). Returns {take name: reason} for the takes whose fit failed."""
+def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
+    """Fit the actor of each take that calibrates (`calibrate = true`, or by default a take of at least DEFAULT_FRAMES
+    frames without an `actor`) on its first frames: one `calibrate` command per take, all submitted to the cluster at
+    once before any chunk is planned (the chunks track with the fit), written on the shared storage
+    (CHUNKS/<take>/actor/) and copied to DIR/<take>/actor.json; a rerun reuses a fit already there. Returns {take
+    name: reason} for the takes whose fit failed, or None when the batch was cancelled meanwhile."""
+    from ..core.actor.frames import DEFAULT_FRAMES
     from ..core.batch.cluster import failure_text
-    from .actor_calibration import DEFAULT_FRAMES
 
-    failed = {}
+    pending = {}
     for take in takes:
-        if not take.calibrate:
+        if take.actor is not None or take.calibrate is False:
             continue
-        folder = out / take.name
-        path = folder / "actor.json"
-        if not path.is_file():
-            first, last = take.frames[0], min(take.frames[1], take.frames[0] + DEFAULT_FRAMES - 1)
-            argv = [*default_command(), "calibrate", "--scene", str(take.scene), "--capture", str(take.capture),
-                    "--out", str(folder), "--frames", f"{first}-{last}"]
-            argv += (["--armature", take.armature] if take.armature else []) + option_args(take.choices)
-            print(f"batch: take {take.name!r}: calibrating the actor on frames {first}-{last}", file=sys.stderr,
-                  flush=True)
-            done = subprocess.run(argv, capture_output=True, text=True, env=command_environment())
-            if done.returncode != 0 or not path.is_file():
-                failed[take.name] = f"actor calibration: {failure_text(done)}"
+        if take.calibrate is None and take.n_frames < DEFAULT_FRAMES:
+            continue
+        shared = chunks_root / take.name / "actor"
+        take.actor = shared / "actor.json"
+        if take.actor.is_file():
+            _keep_in_result(take, out)
+            continue
+        first, last = take.frames[0], min(take.frames[1], take.frames[0] + DEFAULT_FRAMES - 1)
+        argv = [*command, "calibrate", "--scene", mapped(take.scene), "--capture", mapped(take.capture),
+                "--out", mapped(shared), "--frames", f"{first}-{last}"]
+        argv += (["--armature", take.armature] if take.armature else []) + option_args(take.choices)
+        print(f"batch: take {take.name!r}: calibrating the actor on frames {first}-{last}", file=sys.stderr,
+              flush=True)
+        pending[take.name] = (take, runner.submit(f"{take.name}-calibrate", argv, check=False))
+    failed = {}
+    while pending:
+        if cancel_requested(out):
+            return None
+        for name, (take, future) in list(pending.items()):
+            if future.status == "pending":
                 continue
-        take.actor = path
+            del pending[name]
+            try:
+                done = future.result(timeout=5)
+            except Exception as exc:  # noqa: BLE001  (the worker's failure is the take's reason)
+                done = exc
+            if getattr(done, "returncode", 1) != 0 or not take.actor.is_file():
+                failed[name] = f"actor calibration: {failure_text(done)}"
+                take.actor = None
+                continue
+            print(f"batch: take {name!r}: actor calibrated", file=sys.stderr, flush=True)
+            _keep_in_result(take, out)
+        if pending:
+            time.sleep(POLL_SECONDS)
     return failed
+
+
+def _keep_in_result(take, out):
+    """DIR/<take>/actor.json: the fit beside the take's result, where Blender's Track reads it to key the take."""
+    from ..core.actor.actor_file import load_actor, write_actor
+
+    (out / take.name).mkdir(parents=True, exist_ok=True)
+    write_actor(out / take.name / "actor.json", load_actor(take.actor))
 
 
 def _choices_of(args):
@@ -538,19 +571,16 @@ def run(args):
             raise InputError(f"--workers {args.workers}: at least one")
         takes = read_take_list(args.takes, defaults=_choices_of(args), scene=args.scene)
         check_rigs(takes)
-        uncalibrated = calibrate_takes(takes, out)
-        runs = []
-        for take in takes:
+        if args.no_calibrate:
+            for take in takes:
+                take.calibrate = take.calibrate or False  # an explicit `calibrate = true` stands
+        plans = {}
+        for take in takes:  # every take's plan checked before anything runs
             try:
-                plan = plan_chunks(take.frames[0], take.frames[1], args.chunk_frames, args.warmup, args.overlap)
+                plans[take.name] = plan_chunks(take.frames[0], take.frames[1], args.chunk_frames, args.warmup,
+                                               args.overlap)
             except USER_ERRORS as exc:
                 raise type(exc)(f"take {take.name!r}: {exc}") from None
-            actor = load_actor(take.actor) if take.actor is not None else None
-            key = chunk_key(take.settings().to_dict(), take.scene, take.armature, actor, take.capture)
-            runs.append(TakeRun(take, plan, [ChunkFolder(chunks_root, take.name, c.track, key) for c in plan],
-                                seeds_path(chunks_root, take.name, *take.frames, key)))
-            if take.name in uncalibrated:  # fails alone; the other takes go on
-                runs[-1].fail(uncalibrated[take.name])
     except USER_ERRORS as exc:
         write_progress(out, {**blank, "state": "failed", "error": str(exc)})
         return cli_failure("batch", exc)
@@ -562,10 +592,23 @@ def run(args):
         workers = workers or default_workers()
         threads = args.threads_per_chunk or max(1, (os.cpu_count() or 2) // workers)
         env = chunk_environment(threads, command_environment())
-    batch = Batch(args, takes, runs, chunks_root)
+    batch = Batch(args, takes, [], chunks_root)
     previous = signal.signal(signal.SIGTERM, lambda *_: request_cancel(out))  # stop as a cancel does
     try:
         with ChunkRunner(workers=workers, scheduler=args.scheduler, retries=args.retries, env=env) as runner:
+            uncalibrated = calibrate_takes(takes, out, runner, batch.worker_command, batch.mapped, chunks_root)
+            if uncalibrated is None:
+                batch.cancel()
+                return EXIT_CANCELLED
+            for take in takes:
+                plan = plans[take.name]
+                actor = load_actor(take.actor) if take.actor is not None else None
+                key = chunk_key(take.settings().to_dict(), take.scene, take.armature, actor, take.capture)
+                batch.runs.append(TakeRun(take, plan, [ChunkFolder(chunks_root, take.name, c.track, key) for c in plan],
+                                          seeds_path(chunks_root, take.name, *take.frames, key)))
+                if take.name in uncalibrated:  # fails alone; the other takes go on
+                    batch.runs[-1].fail(uncalibrated[take.name])
+            batch.frames_at_start = sum(r.frames_done() for r in batch.runs)
             return batch.run(runner)
     except KeyboardInterrupt:
         batch.cancel()

@@ -103,6 +103,8 @@ def plan_takes(context, out_dir, armature):
     common = {"armature": armature.name}
     if props.use_actor and props.actor_file:
         common["actor"] = bpy.path.abspath(props.actor_file)
+    elif not props.fit_actor_build:
+        common["calibrate"] = False  # else the batch fits each take's actor first, as Track does here
     if props.batch_scope == "folder":
         if not props.batch_folder:
             raise BatchSetupError("No captures folder: set it under Run On in Mocap > Track (each sub-folder with a "
@@ -288,7 +290,7 @@ def finish(scene, run, progress):
         if armature is None or armature.name not in scene.objects:
             raise ResultMismatchError(f"armature {run.armature_name!r} is no longer in scene {scene.name!r}: the "
                                       f"result is in {result}")
-        frames = key_result(scene, armature, result, run.frame_offset, run.actor)
+        frames = key_result(scene, armature, result, run.frame_offset, run.actor or _fitted_actor(result))
     except Exception as exc:  # noqa: BLE001  (said in the panel; the result folder stays)
         from .failures import user_message
 
@@ -304,6 +306,13 @@ def finish(scene, run, progress):
     if failed:
         props.last_error = "; ".join(failed)
     return True
+
+
+def _fitted_actor(result):
+    """The actor calibration the batch fitted for the take (its result folder's actor.json), or None."""
+    from ..core.actor.actor_file import load_actor
+
+    return load_actor(result) if (result / "actor.json").is_file() else None
 
 
 def key_result(scene, armature, result_dir, frame_offset, actor=None):

@@ -155,3 +155,63 @@ def test_a_take_whose_actor_calibration_fails_fails_alone(bpy_module, tmp_path, 
     err = capsys.readouterr().err
     assert "take 'fitted': actor calibration: markerless_mocap calibrate: no person found in frames 0-5" in err
     assert counter.read_text().split() == ["plain"]  # the other take went on to its chunk
+
+
+def test_takes_fit_their_actor_by_default_as_track_does(bpy_module, tmp_path, capsys, monkeypatch):
+    """A take of at least 20 frames without an `actor` is fitted first (on its first 20 frames); a shorter take, a
+    take with `calibrate = false`, and with `batch --no-calibrate` every take that does not ask for it, keep the
+    rig."""
+    import sys
+
+    from markerless_mocap.operators import cmd_batch
+    from markerless_mocap.operators.cli import main
+
+    calls = tmp_path / "calibrations.txt"
+    record = (f"import sys; open({str(calls)!r}, 'a').write(' '.join(sys.argv[sys.argv.index('--frames'):][:2]) + "
+              "'\\n'); print('markerless_mocap calibrate: stopped here by the test', file=sys.stderr); sys.exit(2)")
+    chunk = "import sys; print('markerless_mocap track-chunk: stopped here by the test', file=sys.stderr); sys.exit(2)"
+    monkeypatch.setattr(cmd_batch, "default_command", lambda: [sys.executable, "-c", record])
+    monkeypatch.setattr(cmd_batch.Batch, "chunk_argv", lambda self, run, c: [sys.executable, "-c", chunk])
+    path = _toml(tmp_path, _take("long", frames="0-19") + _take("short", frames="20-38") + _take("off", frames="39-58")
+                 + "calibrate = false\n")
+    assert main(["batch", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--no-overlays"]) == 1
+    assert calls.read_text().splitlines() == ["--frames 0-19"]
+    err = capsys.readouterr().err
+    assert "take 'long': actor calibration: markerless_mocap calibrate: stopped here by the test" in err
+    calls.unlink()
+    path = _toml(tmp_path, _take("long", frames="0-19") + _take("asked", frames="20-38") + "calibrate = true\n")
+    assert main(["batch", str(path), "--out", str(tmp_path / "out2"), "--workers", "1", "--no-overlays",
+                 "--no-calibrate"]) == 1
+    assert calls.read_text().splitlines() == ["--frames 20-38"]  # only the take that asks
+
+
+def test_a_fitted_actor_is_on_the_shared_storage_for_the_chunks_and_beside_the_result(bpy_module, tmp_path, capsys,
+                                                                                      monkeypatch):
+    """The fit is written under the chunks' folder (the workers' shared storage), the chunks track with it
+    (--actor), the take's result folder keeps a copy (what Blender keys with), and a rerun fits nothing again."""
+    import json
+    import sys
+    from pathlib import Path
+
+    from markerless_mocap.operators import cmd_batch
+    from markerless_mocap.operators.cli import main
+
+    calls, chunks = tmp_path / "calibrations.txt", tmp_path / "chunks.txt"
+    actor = {"format": "markerless_mocap.actor", "version": 1, "lengths_m": {"height": 1.7}, "factors": {}}
+    fit = (f"import json, pathlib, sys; a = sys.argv; open({str(calls)!r}, 'a').write(a[a.index('--out') + 1] + "
+           f"'\\n'); out = pathlib.Path(a[a.index('--out') + 1]); out.mkdir(parents=True, exist_ok=True); "
+           f"(out / 'actor.json').write_text(json.dumps({actor!r}))")
+    chunk = (f"import sys; a = sys.argv; open({str(chunks)!r}, 'a').write(a[a.index('--actor') + 1] + '\\n'); "
+             "print('markerless_mocap track-chunk: stopped here by the test', file=sys.stderr); sys.exit(2)")
+    monkeypatch.setattr(cmd_batch, "default_command", lambda: [sys.executable, "-c", fit])
+    monkeypatch.setattr(cmd_batch.Batch, "chunk_argv", lambda self, run, c: [sys.executable, "-c", chunk,
+                                                                           *self._take_args(run, str)])
+    path = _toml(tmp_path, _take("long", frames="0-29") + _take("other", frames="30-59"))
+    out = tmp_path / "out"
+    for _ in range(2):
+        assert main(["batch", str(path), "--out", str(out), "--workers", "2", "--no-overlays"]) == 1
+    shared = [str((out / "_chunks" / name / "actor").resolve()) for name in ("long", "other")]
+    assert sorted(calls.read_text().split()) == shared  # once each: the rerun reused the fits
+    assert set(chunks.read_text().split()) == {str(Path(p) / "actor.json") for p in shared}
+    for name in ("long", "other"):
+        assert json.loads((out / name / "actor.json").read_text()) == actor

@@ -18,9 +18,9 @@ from scipy.optimize import least_squares
 from ..errors import InputError
 from ..evidence.keypoint_fit import align_root, triangulated_landmarks
 from ..evidence.keypoints import KeypointTargets, landmark_weights, rig_keypoints
+from .frames import MIN_FRAMES
 from .proportions import SEGMENTS, Proportions, scaled_body, segment_lengths
 
-MIN_FRAMES = 3           # frames with enough triangulated landmarks to fit proportions at all
 MIN_POINTS = 10          # triangulated landmarks (of 15) for a frame to take part
 PULL_TO_OVERALL = 0.02   # metres of residual per unit of log(factor / overall): weak, so the landmarks decide
 # ...but the neck is seen through one landmark (the nose), which its three angles can reach at almost any

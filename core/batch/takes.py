@@ -8,7 +8,8 @@
     frames = "0-599"                optional: "A-B" inclusive or [A, B]; default every frame
     armature = "Armature"           optional
     actor = "anna/actor.json"       optional: an actor calibration to track with
-    calibrate = true                optional: fit the actor's proportions on the take's first frames first
+    calibrate = false               optional: track with the rig's proportions; by default a take of at least
+                                    20 frames without `actor` is tracked with the actor's, fitted on its first frames
     seed = 1                        optional: any tracking option, over [defaults]
 
 Every mistake is an InputError naming the take (or the file) and the fix, found before anything is tracked. Whether
@@ -44,7 +45,9 @@ class Take:
     armature: str | None = None
     actor: Path | None = None
     choices: dict = field(default_factory=dict)  # tracking options (CHOICE_NAMES) given for this take
-    calibrate: bool = False  # fit the actor's proportions first (operators/cmd_batch.py); then `actor` is that fit
+    # fit the actor's proportions first (operators/cmd_batch.py; then `actor` is that fit): True, False, or None for
+    # the default (fitted on a take long enough for it, as `track` does)
+    calibrate: bool | None = None
 
     def settings(self):
         return settings_from_choices(self.choices)
@@ -200,8 +203,8 @@ def _takes_of_file(path, defaults, scene):
         armature = entry.get("armature")
         if armature is not None and not isinstance(armature, str):
             raise TakeListError(f"{where}: armature must be the armature object's name (text)")
-        calibrate = entry.get("calibrate", False)
-        if not isinstance(calibrate, bool):
+        calibrate = entry.get("calibrate")
+        if calibrate is not None and not isinstance(calibrate, bool):
             raise TakeListError(f"{where}: calibrate must be true or false")
         if calibrate and "actor" in entry:
             raise TakeListError(f"{where}: calibrate and actor both given: calibrate fits a new actor.json, actor "
