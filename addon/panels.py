@@ -180,6 +180,7 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         settings.prop(props, "seed")
         settings.prop(props, "refine")
         settings.prop(props, "smoothing_hz", text="Smoothing (Hz)")
+        settings.prop(props, "fit_actor_build")
         settings.prop(props, "foot_lock")
         threshold = settings.row()
         threshold.enabled = props.foot_lock
@@ -205,6 +206,8 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         if props.batch_dir:  # a take sent to local processes or a cluster: its chunks
             layout.progress(factor=props.progress, type="BAR",
                             text=f"{props.chunks_done}/{props.chunks_total} chunks")
+        elif props.is_calibrating:  # Track fits the actor's build first (Fit the Actor's Build)
+            layout.progress(factor=props.calibration_progress, type="BAR", text=props.calibration_status)
         elif props.is_tracking and props.preparing:
             layout.progress(factor=props.progress, type="BAR", text=f"Preparing {100 * props.progress:.0f} %")
         elif props.is_tracking or props.frames_solved:
@@ -216,6 +219,8 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
             layout.operator("mocap.cancel_batch", icon="CANCEL")
         elif props.is_tracking:
             layout.label(text="Esc to cancel (keys made so far are kept)", icon="CANCEL")
+        elif props.is_calibrating:
+            layout.label(text="Esc to cancel", icon="CANCEL")
         if props.last_error:
             _wrapped(layout, props.last_error, context, icon="ERROR", alert=True)
 

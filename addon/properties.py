@@ -136,6 +136,12 @@ class MocapSettings(bpy.types.PropertyGroup):
     use_actor: BoolProperty(name="Track with Calibration", default=False,
                             description="Track with the actor's proportions and key the rig with the actor's "
                                         "rotations (root path rescaled to the rig)")
+    # on by default: it measured at least as good as the rig on every sample scene (docs/actor-calibration.md)
+    fit_actor_build: BoolProperty(name="Fit the Actor's Build", default=True,
+                                  description="Before tracking one actor, fit the actor's proportions on the first "
+                                              "Calibration Frames of the take (Subject > Actor Calibration) unless "
+                                              "a calibration of this capture is loaded; a take shorter than that "
+                                              "keeps the rig's. Off: track with the rig's own proportions")
 
     # ---- tracker
     algorithm: _enum("algorithm")

@@ -37,6 +37,64 @@ def _measured(props):
     return measured
 
 
+def calibration_first(context):
+    """Whether Track fits the actor's build before tracking (Fit the Actor's Build): one actor tracked on this
+    Blender, not resuming, no calibration of this capture loaded, and a take at least Calibration Frames long."""
+    from ..core.errors import InputError
+    from .setup_subject import several_actors
+
+    props = context.scene.mocap
+    if not props.fit_actor_build or props.resume or props.run_on != "this" or not props.capture_dir:
+        return False  # (no capture: Track itself names the fix)
+    capture = Path(bpy.path.abspath(props.capture_dir)).resolve()
+    try:
+        if several_actors(context) or _calibration_of(props.actor_file, capture):
+            return False
+        from .cmd_track import take_frames
+
+        return len(take_frames(capture, props.frame_range())) >= props.calibrate_frames
+    except InputError:  # a bad capture or range: Track's own start says what and how to fix it
+        return False
+
+
+def _calibration_of(actor_file, capture):
+    """The loaded calibration (Subject panel) was made on this capture: Track uses it as 'Track with Calibration'
+    says, and fits none."""
+    if not actor_file:
+        return False
+    from ..core.actor.actor_file import load_actor
+    from ..core.errors import InputError
+
+    try:
+        data = load_actor(bpy.path.abspath(actor_file))
+    except (InputError, OSError):
+        return False
+    made_on = data.get("capture")
+    return bool(made_on) and Path(made_on).resolve() == capture
+
+
+def _inputs(context):
+    """The armature, capture folder, output folder and tracking settings of the panels."""
+    from .setup_subject import subject_armature
+    from .track import TrackSetupError, output_folder, run_settings
+
+    props = context.scene.mocap
+    if not props.capture_dir:
+        raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
+    armature = subject_armature(context)
+    settings, _ = run_settings(context)
+    return armature, Path(bpy.path.abspath(props.capture_dir)), output_folder(context), settings
+
+
+def calibrate_here(context):
+    """Fit the actor on the panels' calibration frames on this thread and save it: (ProportionsFit, actor.json)."""
+    from .actor_calibration import calibrate_actor
+
+    armature, capture_dir, out_dir, settings = _inputs(context)
+    return calibrate_actor(context.scene, armature, capture_dir, out_dir, settings,
+                           frames=_calibration_frames(context.scene.mocap), measured=_measured(context.scene.mocap))
+
+
 def show_calibration(props, actor_path, lines):
     props.actor_file = str(actor_path)
     props.actor_summary = "\n".join(lines)
@@ -52,21 +110,16 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
     bl_label = "Calibrate Actor"
     bl_options = {"REGISTER"}
 
+    # set by Track (Fit the Actor's Build): once the fit is saved, Track starts with it
+    then_track: bpy.props.BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
+
     @classmethod
     def poll(cls, context):
         props = context.scene.mocap if context.scene is not None else None
         return props is not None and not props.is_tracking and not props.is_calibrating
 
     def _inputs(self, context):
-        from .setup_subject import subject_armature
-        from .track import TrackSetupError, output_folder, run_settings
-
-        props = context.scene.mocap
-        if not props.capture_dir:
-            raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
-        armature = subject_armature(context)
-        settings, _ = run_settings(context)
-        return armature, Path(bpy.path.abspath(props.capture_dir)), output_folder(context), settings
+        return _inputs(context)
 
     def _fail(self, context, message):
         context.scene.mocap.last_error = message
@@ -79,17 +132,17 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         lines = describe(fit)
         show_calibration(context.scene.mocap, path, lines)
         self.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
+        if self.then_track:
+            try:
+                bpy.ops.mocap.track("INVOKE_DEFAULT")
+            except RuntimeError:
+                pass  # Track could not start: it said why in the panel (last_error) and the status bar
         return {"FINISHED"}
 
     # ---- synchronous: background mode, scripts, tests, the GPU backend (bpy's gpu works on the main thread only)
     def execute(self, context):
-        from .actor_calibration import calibrate_actor
-
-        props = context.scene.mocap
         try:
-            armature, capture_dir, out_dir, settings = self._inputs(context)
-            fit, path = calibrate_actor(context.scene, armature, capture_dir, out_dir, settings,
-                                        frames=_calibration_frames(props), measured=_measured(props))
+            fit, path = calibrate_here(context)
         except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
             return self._fail(context, user_message(exc, "The calibration"))
         return self._show_result(context, fit, path)

@@ -4,6 +4,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..core.actor.frames import DEFAULT_FRAMES
 from ..core.tracking.foot_contact import CONTACT_SPEED
 from ..core.tracking.options import OPTIONS, settings_from_choices
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
@@ -60,9 +61,12 @@ def add_arguments(p):
     p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
     p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
     actor = p.add_mutually_exclusive_group()
-    actor.add_argument("--calibrate", action="store_true",
+    actor.add_argument("--calibrate", action="store_true", default=None,
                        help="fit the actor's proportions on the first frames first (saved as OUT/actor.json), then "
-                            "track with them and key the character with the actor's rotations")
+                            "track with them and key the character with the actor's rotations (the default for one "
+                            f"actor on a take of at least {DEFAULT_FRAMES} frames; given, it fits on a shorter one)")
+    actor.add_argument("--no-calibrate", dest="calibrate", action="store_false",
+                       help="track with the rig's own proportions (no actor calibration)")
     actor.add_argument("--actor", type=Path, help="reuse a saved actor calibration (actor.json of an earlier take)")
     p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 20 tracked)")
     p.add_argument("--calibrate-landmarks-only", action="store_true",
@@ -148,35 +152,59 @@ def run_session(session, progress=None, log=print):
 
 
 def load_actor_option(args, scene, armature, backend=None):
-    """The actor calibration for --actor FILE, or the one --calibrate fits now (saved in --out); None without."""
+    """The actor calibration for --actor FILE, or the one fitted now (saved in --out): by default on a take of at
+    least DEFAULT_FRAMES frames, with --calibrate on any; None with --no-calibrate, on a shorter take, or when
+    resuming a take that was tracked with the rig."""
     from ..core.actor.actor_file import load_actor
     from ..core.actor.measured_lengths import parse_measured
+    from ..core.errors import InputError
 
+    asked = getattr(args, "calibrate", None)  # True: --calibrate, False: --no-calibrate, None: the default
     measured = parse_measured(getattr(args, "calibrate_measured", None))
-    if measured and not getattr(args, "calibrate", False):
-        from ..core.errors import InputError
-
-        raise InputError("--calibrate-measured applies to --calibrate; with --actor the saved calibration's lengths "
-                         "are used (calibrate again with --measured to change them)")
+    if measured and (asked is False or getattr(args, "actor", None) is not None):
+        raise InputError("--calibrate-measured applies to the actor calibration; with --actor the saved calibration's "
+                         "lengths are used (calibrate again with --measured to change them), with --no-calibrate "
+                         "none is made")
     if getattr(args, "actor", None) is not None:
         return load_actor(args.actor)
-    if not getattr(args, "calibrate", False):
+    if asked is False:
         return None
-    if args.resume and (args.out / "actor.json").is_file():
-        return load_actor(args.out / "actor.json")  # the calibration the interrupted run used
+    if args.resume:
+        if (args.out / "actor.json").is_file():
+            return load_actor(args.out / "actor.json")  # the calibration the interrupted run used
+        if (args.out / "checkpoint.npz").is_file():
+            return None  # that run tracked with the rig: its frames and the rest stay one body
     from .actor_calibration import calibrate_actor, describe
 
     frames = parse_frames(args.calibrate_frames)
     if frames is None and args.frames:
-        from .actor_calibration import DEFAULT_FRAMES
-
         frames = parse_frames(args.frames)[:DEFAULT_FRAMES]
+    if asked is None and not measured:
+        length = len(take_frames(args.capture, parse_frames(args.frames)))  # a bad range is said before fitting
+        if length < DEFAULT_FRAMES:
+            print(f"actor: the take has {length} frames, fewer than the {DEFAULT_FRAMES} the actor calibration fits "
+                  "on by default: tracking with the rig's proportions (--calibrate fits on these anyway)",
+                  file=sys.stderr)
+            return None
     fit, path = calibrate_actor(scene, armature, args.capture, args.out, settings_from_args(args, backend),
                                 frames=frames, silhouettes=not args.calibrate_landmarks_only,
                                 log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), measured=measured)
     for line in describe(fit):
         print(f"actor: {line}", file=sys.stderr)
     return load_actor(path)
+
+
+def take_frames(capture_dir, frames=None):
+    """The capture frames a take tracks: `frames` checked against the footage (the error the tracking would give),
+    or every frame the footage has."""
+    from ..core.capture.capture import load_capture
+
+    capture = load_capture(capture_dir)
+    try:
+        footage = capture.frames
+        return list(range(footage.n_frames)) if frames is None else footage.require_frames(frames)
+    finally:
+        capture.close()
 
 
 def run(args):

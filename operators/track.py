@@ -367,10 +367,32 @@ class MOCAP_OT_track(bpy.types.Operator):
                 self.report({"ERROR"}, context.scene.mocap.last_error)
                 return {"CANCELLED"}
             return start(self, context)
+        if not self._calibrate_first_here(context):
+            return {"CANCELLED"}
         job, session = self._begin(context)
         if job is None:
             return {"CANCELLED"}
         return self._run_foreground(context, job, session)
+
+    def _calibrate_first_here(self, context):
+        """Fit the Actor's Build, synchronously, when Track should (operators/calibrate.py); False when it failed."""
+        from .calibrate import calibrate_here, calibration_first, show_calibration
+
+        if not calibration_first(context):
+            return True
+        from .actor_calibration import describe
+
+        props = context.scene.mocap
+        try:
+            fit, path = calibrate_here(context)
+        except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+            props.last_error = user_message(exc, "Fitting the actor's build")
+            self.report({"ERROR"}, f"{props.last_error} (untick Fit the Actor's Build to track with the rig's)")
+            return False
+        lines = describe(fit)
+        show_calibration(props, path, lines)
+        self.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
+        return True
 
     def _run_foreground(self, context, job, session):
         interactive = not bpy.app.background
@@ -395,6 +417,14 @@ class MOCAP_OT_track(bpy.types.Operator):
     def invoke(self, context, _event):
         if context.window is None or context.scene.mocap.run_on != "this":
             return self.execute(context)
+        from .calibrate import calibration_first
+
+        if calibration_first(context):  # the actor's build first (modal, Esc cancels); it starts Track once saved
+            try:
+                result = bpy.ops.mocap.calibrate_actor("INVOKE_DEFAULT", then_track=True)
+            except RuntimeError:  # it could not start: it said why (last_error)
+                return {"CANCELLED"}
+            return {"FINISHED"} if result & {"RUNNING_MODAL", "FINISHED"} else {"CANCELLED"}
         job, session = self._begin(context)
         if job is None:
             return {"CANCELLED"}

@@ -240,7 +240,7 @@ def test_a_mistyped_measured_length_stops_before_anything_is_tracked(tmp_path):
                           "--capture", str(scene), "--out", str(tmp_path / "t"), "--actor", str(tmp_path / "a.json"),
                           "--calibrate-measured", "height=1.6"], capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
-    assert "--calibrate-measured applies to --calibrate" in run.stderr.strip().splitlines()[-1]
+    assert "--calibrate-measured applies to the actor calibration" in run.stderr.strip().splitlines()[-1]
 
 
 def test_the_summary_says_what_the_masks_set_and_what_they_did_not():

@@ -108,7 +108,8 @@ class _Session:
 
 @pytest.fixture
 def cli_track(bpy_module, monkeypatch, tmp_path):
-    """`markerless_mocap track` on a scene with one rig, the session replaced by _Session."""
+    """`markerless_mocap track` on a scene with one rig, the session replaced by _Session (and no actor calibration:
+    it would track the footage for real)."""
     from rig_helpers import build_armature
     from markerless_mocap.operators import cli, track_session
 
@@ -119,7 +120,7 @@ def cli_track(bpy_module, monkeypatch, tmp_path):
 
     def run(capsys):
         code = cli.main(["track", "--capture", str(tmp_path / "capture"), "--out", str(tmp_path / "out"),
-                         "--backend", "numpy", "--no-export", "--no-overlays"])
+                         "--backend", "numpy", "--no-export", "--no-overlays", "--no-calibrate"])
         return code, capsys.readouterr().err.strip().splitlines()
 
     return run, tmp_path

@@ -3,7 +3,8 @@
 #   1. provision the chroot once (cached under $MOCAP_STAGE_CACHE, default /var/cache/markerless_mocap)
 #   2. enable the add-on from this checkout, run `blender -b SUBJECT --command markerless_mocap track`
 #      on a sample scene (few frames, small budget) and check every result file
-#   3. start the UI under Xvfb and drive Import, Check, Calibrate Actor and Track (modal), Esc and Export;
+#   3. start the UI under Xvfb and drive Import, Check, Track (the actor's fit first, then tracking; both modal),
+#      Esc and Export;
 #      screenshots
 # Exit 0 = passed, 77 = skipped (cannot provision here; the reason is printed), anything else = failed.
 #   bash tests/real_blender/stage.sh [--provision-only | --resave-subjects | --readme-screenshot]
@@ -225,7 +226,7 @@ run_in blender -b "$src/sample_scenes/walk/subject.blend" --python-exit-code 1 \
 grep '^STAGE cluster' "$out/cluster_take.log" | sed 's/^STAGE/[stage]/'
 log "the take on local processes took $(( $(date +%s) - t1 )) s"
 
-# 5. the UI under Xvfb: Import, Check, Calibrate Actor (modal), Track (modal), Esc, Resume twice, Export, with screenshots
+# 5. the UI under Xvfb: Import, Check, Track (the calibration first, modal; then tracking, modal), Esc, Resume twice, Export, with screenshots
 start_xvfb
 log "UI on Xvfb :$display: Import, Check, Calibrate, Track (modal), Esc, Resume, Resume at 3 Hz, Export"
 t1=$(date +%s)
@@ -246,7 +247,8 @@ check(r.get("check", {}).get("dofs") == 30, "Check rig: 30 DOF")
 check(r.get("preset") == {"name": "preview", "budget": [50, 4], "local_fit_fine": False},
       f"the Preview preset: {r.get('preset')}")
 cal = r.get("calibrate", {})
-check(cal.get("invoke") == ["RUNNING_MODAL"], f"Calibrate Actor did not run modal: {cal.get('invoke')}")
+check(cal.get("track_click") == ["FINISHED"] and cal.get("invoke") == ["RUNNING_MODAL"],
+      f"Track did not start the actor's calibration (modal): {cal.get('track_click')} {cal.get('invoke')}")
 check(bool(cal.get("summary")) and cal["summary"][0].startswith("height 1.550 m (rig ")
       and cal["summary"][0].endswith("measured 1.550 m") and cal.get("use_actor"),
       f"no calibrated height (the measured 1.550 m) shown: {cal.get('summary')} {cal.get('error')!r}")
@@ -254,7 +256,7 @@ check(any(l.startswith("forearm 25.0 cm (rig ") and l.endswith(" as measured") f
       f"no measured forearm (25.0 cm) shown: {cal.get('summary')}")
 check(any(l.startswith("Calibrating: frame ") for l in cal.get("status_lines", [])), "no calibration progress line")
 check(cal.get("ticks", 0) >= 5, f"the UI timer ticked {cal.get('ticks')} times while calibrating")
-check(r.get("track_invoke") == ["RUNNING_MODAL"], "Track did not run modal")
+check(r.get("track_invoke") == ["RUNNING_MODAL"], "Track did not start (modal) once the calibration was saved")
 cancel = r.get("cancel", {})
 check(cancel.get("status", "").startswith("Cancelled after"), f"cancel status {cancel.get('status')!r}")
 check(len(cancel.get("keyed_frames", [])) >= 2 and cancel.get("keyed_frames") == list(range(1, 1 + cancel.get("frames_solved", -1))),

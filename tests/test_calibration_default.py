@@ -1,0 +1,173 @@
+"""The actor's build by default (issue 43): `track` fits the actor's proportions first on a take of at least 20
+frames unless told --no-calibrate; a shorter take, a resumed take tracked with the rig and several actors keep the
+rig. In Blender, Track does the same with *Fit the Actor's Build* (on by default) and reuses a calibration made on
+the same capture. The calibration itself is replaced by a recorder here: its accuracy is tests/test_actor_ui.py's
+and docs/actor-calibration.md's."""
+import argparse
+import importlib
+from pathlib import Path
+
+import pytest
+
+from scene_helpers import scene_dir
+
+WALK = scene_dir("walk")  # 60 frames
+
+
+def _args(out, *argv):
+    from markerless_mocap.operators.cmd_track import add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    return parser.parse_args(["--capture", str(WALK), "--out", str(out), *argv])
+
+
+@pytest.fixture
+def recorded_calibrations(monkeypatch, tmp_path):
+    """calibrate_actor replaced by a recorder of the frames it was given; load_actor by the path it was given."""
+    from markerless_mocap.core.actor import actor_file
+    from markerless_mocap.operators import actor_calibration
+
+    calls = []
+
+    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, **_):
+        calls.append(None if frames is None else list(frames))
+        return None, Path(out_dir) / "actor.json"
+
+    monkeypatch.setattr(actor_calibration, "calibrate_actor", fake_calibrate)
+    monkeypatch.setattr(actor_calibration, "describe", lambda fit: ["height 1.700 m (rig 1.700 m)"])
+    monkeypatch.setattr(actor_file, "load_actor", lambda path: {"loaded": str(path)})
+    return calls
+
+
+def test_track_fits_the_actor_first_by_default_on_a_long_enough_take(recorded_calibrations, tmp_path, capsys):
+    from markerless_mocap.operators.cmd_track import load_actor_option
+
+    out = tmp_path / "r"
+    # the whole 60-frame take, and a 30-frame range: fitted on their first 20 frames
+    assert load_actor_option(_args(out), None, None) == {"loaded": str(out / "actor.json")}
+    assert load_actor_option(_args(out, "--frames", "10-39"), None, None) is not None
+    assert recorded_calibrations == [None, list(range(10, 30))]  # None: the session takes the take's first 20
+    # a 12-frame take keeps the rig, and says so; --calibrate fits on it anyway
+    assert load_actor_option(_args(out, "--frames", "0-11"), None, None) is None
+    assert "the take has 12 frames, fewer than the 20" in capsys.readouterr().err
+    assert load_actor_option(_args(out, "--frames", "0-11", "--calibrate"), None, None) is not None
+    assert recorded_calibrations[-1] == list(range(12))
+    # --no-calibrate: the rig; a measured length asks for a calibration, so not with --no-calibrate
+    del recorded_calibrations[:]
+    assert load_actor_option(_args(out, "--no-calibrate"), None, None) is None
+    assert recorded_calibrations == []
+    from markerless_mocap.core.errors import InputError
+
+    with pytest.raises(InputError, match="--calibrate-measured applies to the actor calibration"):
+        load_actor_option(_args(out, "--no-calibrate", "--calibrate-measured", "height=1.7"), None, None)
+    with pytest.raises(SystemExit):  # argparse: one of --calibrate, --no-calibrate, --actor
+        _args(out, "--calibrate", "--no-calibrate")
+
+
+def test_a_resumed_take_keeps_the_body_it_was_tracked_with(recorded_calibrations, tmp_path):
+    from markerless_mocap.operators.cmd_track import load_actor_option
+
+    rig_run = tmp_path / "rig"
+    rig_run.mkdir()
+    (rig_run / "checkpoint.npz").write_bytes(b"")  # an earlier run tracked with the rig and was interrupted
+    assert load_actor_option(_args(rig_run, "--resume"), None, None) is None
+    fitted_run = tmp_path / "fitted"
+    fitted_run.mkdir()
+    (fitted_run / "checkpoint.npz").write_bytes(b"")
+    (fitted_run / "actor.json").write_text("{}")
+    assert load_actor_option(_args(fitted_run, "--resume"), None, None) == {"loaded": str(fitted_run / "actor.json")}
+    fresh = tmp_path / "fresh"  # interrupted before its first frame was saved: fitted as a new take would be
+    assert load_actor_option(_args(fresh, "--resume"), None, None) is not None
+    assert recorded_calibrations == [None]
+
+
+# ---- in Blender: Track with Fit the Actor's Build
+
+def _blender(addon_module_name, bpy_module, monkeypatch, tmp_path):
+    from rig_helpers import subject_blend_path
+    from test_actor_ui import _fit
+    from test_addon_ui import FakeSession
+
+    mod = lambda name: importlib.import_module(f"{addon_module_name}.{name}")
+    bpy = bpy_module
+
+    class ActorSession(FakeSession):
+        def __init__(self, *args, actor=None, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.args["actor"] = actor
+
+    monkeypatch.setattr(mod("operators.track"), "TrackSession", ActorSession)
+    monkeypatch.setattr(FakeSession, "fail_at", None)
+    monkeypatch.setattr(FakeSession, "block_at", None)
+    bpy.ops.wm.open_mainfile(filepath=str(subject_blend_path()))
+    arm = mod("addon.scene_bridge").find_armature(bpy.context.scene)
+    body = mod("addon.scene_bridge").body_from_blender(arm, None, bpy.context.scene)
+    fit = _fit(body, mod("core.actor.proportions"), mod("core.actor.landmark_fit"))
+    calls = []
+
+    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, **_):
+        calls.append((Path(capture_dir).name, list(frames)))
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        path = mod("core.actor.actor_file").save_actor(Path(out_dir) / "actor.json", fit, subject_name=armature.name,
+                                                       capture=Path(capture_dir).resolve())
+        return fit, path
+
+    monkeypatch.setattr(mod("operators.actor_calibration"), "calibrate_actor", fake_calibrate)
+    m = bpy.context.scene.mocap
+    m.capture_dir, m.output_dir = str(WALK), str(tmp_path / "out")
+    return bpy, m, calls, ActorSession
+
+
+@pytest.mark.bpy
+def test_track_in_blender_fits_the_actor_first_and_reuses_the_fit(addon_module_name, bpy_module, monkeypatch,
+                                                                    tmp_path):
+    bpy, m, calls, session = _blender(addon_module_name, bpy_module, monkeypatch, tmp_path)
+    assert m.fit_actor_build  # on by default
+    m.use_frame_range, m.frame_start, m.frame_end, m.calibrate_frames = True, 5, 29, 20
+    assert bpy.ops.mocap.track() == {"FINISHED"}, m.last_error
+    assert calls == [("walk", list(range(5, 25)))]
+    assert session.last.args["actor"]["height_m"] > 0 and m.use_actor  # tracked with the fit, which the panel shows
+    assert bpy.ops.mocap.track() == {"FINISHED"}  # the same capture again: its calibration is reused
+    assert len(calls) == 1 and session.last.args["actor"] is not None
+    m.capture_dir = str(scene_dir("sit"))  # another capture: fitted again
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert [c[0] for c in calls] == ["walk", "sit"]
+    # no capture there: no fit is tried (the real session's start names the problem; this one is a stand-in)
+    m.capture_dir, m.use_frame_range = str(tmp_path / "nowhere"), False
+    assert bpy.ops.mocap.track() == {"FINISHED"} and len(calls) == 2
+
+
+@pytest.mark.bpy
+@pytest.mark.parametrize("setting", ["short take", "switched off", "resumed"])
+def test_track_in_blender_keeps_the_rig_when_it_should(addon_module_name, bpy_module, monkeypatch, tmp_path, setting):
+    bpy, m, calls, session = _blender(addon_module_name, bpy_module, monkeypatch, tmp_path)
+    m.use_frame_range, m.frame_start, m.frame_end = True, 0, 29
+    if setting == "short take":
+        m.frame_end = 18  # 19 frames of the 20 the calibration fits on
+    elif setting == "switched off":
+        m.fit_actor_build = False
+    else:
+        m.resume = True  # the earlier run's body stands
+    assert bpy.ops.mocap.track() == {"FINISHED"}, m.last_error
+    assert calls == [] and session.last.args["actor"] is None
+
+
+@pytest.mark.bpy
+def test_a_failed_fit_stops_track_with_the_reason_and_the_way_out(addon_module_name, bpy_module, monkeypatch,
+                                                                   tmp_path):
+    bpy, m, calls, session = _blender(addon_module_name, bpy_module, monkeypatch, tmp_path)
+    errors = importlib.import_module(f"{addon_module_name}.core.actor.landmark_fit")
+
+    def no_person(*_args, **_kwargs):
+        raise errors.ProportionsFitError("no frame has 10 triangulated landmarks")
+
+    monkeypatch.setattr(importlib.import_module(f"{addon_module_name}.operators.actor_calibration"),
+                        "calibrate_actor", no_person)
+    m.use_frame_range, m.frame_start, m.frame_end = True, 0, 29
+    from test_addon_ui import FakeSession
+
+    FakeSession.last = None
+    with pytest.raises(RuntimeError, match="no frame has 10 triangulated landmarks.*untick Fit the Actor's Build"):
+        bpy.ops.mocap.track()
+    assert session.last is None and "no frame has 10 triangulated landmarks" in m.last_error  # nothing tracked
