@@ -41,19 +41,19 @@ def calibration_first(context):
     """Whether Track fits the actor's build before tracking (Fit the Actor's Build): one actor tracked on this
     Blender, not resuming, no calibration of this capture loaded, and a take at least Calibration Frames long."""
     from ..core.errors import InputError
-    from .setup_subject import several_actors
+    from .setup_subject import subject_armatures
 
     props = context.scene.mocap
     if not props.fit_actor_build or props.resume or props.run_on != "this" or not props.capture_dir:
         return False  # (no capture: Track itself names the fix)
     capture = Path(bpy.path.abspath(props.capture_dir)).resolve()
     try:
-        if several_actors(context) or _calibration_of(props.actor_file, capture):
+        if len(subject_armatures(context)) != 1 or _calibration_of(props.actor_file, capture):
             return False
         from .cmd_track import take_frames
 
         return len(take_frames(capture, props.frame_range())) >= props.calibrate_frames
-    except InputError:  # a bad capture or range: Track's own start says what and how to fix it
+    except InputError:  # no armature to track, a bad capture or range: Track's own start says what and how to fix it
         return False
 
 
@@ -74,14 +74,15 @@ def _calibration_of(actor_file, capture):
 
 
 def _inputs(context):
-    """The armature, capture folder, output folder and tracking settings of the panels."""
-    from .setup_subject import subject_armature
+    """The armature (the one Track solves), capture folder, output folder and tracking settings of the panels."""
+    from .setup_subject import subject_armature, subject_armatures
     from .track import TrackSetupError, output_folder, run_settings
 
     props = context.scene.mocap
     if not props.capture_dir:
         raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
-    armature = subject_armature(context)
+    actors = subject_armatures(context)
+    armature = actors[0] if len(actors) == 1 else subject_armature(context)
     settings, _ = run_settings(context)
     return armature, Path(bpy.path.abspath(props.capture_dir)), output_folder(context), settings
 
