@@ -102,6 +102,15 @@ def show_calibration(props, actor_path, lines):
     props.use_actor = True
 
 
+def report_calibration(operator, props, fit, path):
+    """A saved fit into the Subject panel (its summary, Track with Calibration on) and the status bar."""
+    from .actor_calibration import describe
+
+    lines = describe(fit)
+    show_calibration(props, path, lines)
+    operator.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
+
+
 class MOCAP_OT_calibrate_actor(bpy.types.Operator):
     """Fit the actor's height and segment lengths to the first frames of the capture (tracks them with the rig,
     fits the proportions to the learned landmarks, then the forearm and hip width to the person masks); saved as
@@ -119,20 +128,13 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         props = context.scene.mocap if context.scene is not None else None
         return props is not None and not props.is_tracking and not props.is_calibrating
 
-    def _inputs(self, context):
-        return _inputs(context)
-
     def _fail(self, context, message):
         context.scene.mocap.last_error = message
         self.report({"ERROR"}, message)
         return {"CANCELLED"}
 
     def _show_result(self, context, fit, path):
-        from .actor_calibration import describe
-
-        lines = describe(fit)
-        show_calibration(context.scene.mocap, path, lines)
-        self.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
+        report_calibration(self, context.scene.mocap, fit, path)
         if self.then_track:
             try:
                 bpy.ops.mocap.track("INVOKE_DEFAULT")
@@ -156,7 +158,7 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             return self.execute(context)
         props = context.scene.mocap
         try:
-            armature, capture_dir, out_dir, settings = self._inputs(context)
+            armature, capture_dir, out_dir, settings = _inputs(context)
             if settings.backend == "gpu":
                 return self.execute(context)
             frames = _calibration_frames(props)

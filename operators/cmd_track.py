@@ -176,11 +176,12 @@ def load_actor_option(args, scene, armature, backend=None):
             return None  # that run tracked with the rig: its frames and the rest stay one body
     from .actor_calibration import calibrate_actor, describe
 
+    tracked = parse_frames(args.frames)
     frames = parse_frames(args.calibrate_frames)
-    if frames is None and args.frames:
-        frames = parse_frames(args.frames)[:DEFAULT_FRAMES]
+    if frames is None and tracked is not None:
+        frames = tracked[:DEFAULT_FRAMES]
     if asked is None and not measured:
-        length = len(take_frames(args.capture, parse_frames(args.frames)))  # a bad range is said before fitting
+        length = len(take_frames(args.capture, tracked))  # a bad range is said before fitting
         if length < DEFAULT_FRAMES:
             print(f"actor: the take has {length} frames, fewer than the {DEFAULT_FRAMES} the actor calibration fits "
                   "on by default: tracking with the rig's proportions (--calibrate fits on these anyway)",

@@ -376,12 +376,10 @@ class MOCAP_OT_track(bpy.types.Operator):
 
     def _calibrate_first_here(self, context):
         """Fit the Actor's Build, synchronously, when Track should (operators/calibrate.py); False when it failed."""
-        from .calibrate import calibrate_here, calibration_first, show_calibration
+        from .calibrate import calibrate_here, calibration_first, report_calibration
 
         if not calibration_first(context):
             return True
-        from .actor_calibration import describe
-
         props = context.scene.mocap
         try:
             fit, path = calibrate_here(context)
@@ -389,9 +387,7 @@ class MOCAP_OT_track(bpy.types.Operator):
             props.last_error = user_message(exc, "Fitting the actor's build")
             self.report({"ERROR"}, f"{props.last_error} (untick Fit the Actor's Build to track with the rig's)")
             return False
-        lines = describe(fit)
-        show_calibration(props, path, lines)
-        self.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
+        report_calibration(self, props, fit, path)
         return True
 
     def _run_foreground(self, context, job, session):
