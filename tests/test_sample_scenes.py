@@ -707,7 +707,8 @@ def test_pose2sim_subject_stands_where_the_images_put_the_person(bpy_module):
 # ---- issue 43's hard motion and issue 44's long take ----------------------------------------------------------
 def _clips_the_prior_learns_from():
     from markerless_mocap.core.tracking import motion_library
-    return {Path(f).name for f in (Path(motion_library.__file__).resolve().parents[1] / "data" / "motion").iterdir()}
+    data = Path(motion_library.__file__).resolve().parents[1] / "data"
+    return {f.name for folder in ("motion", "poses") for f in (data / folder).iterdir()}  # clips and pose excerpts
 
 
 def test_dance_is_fast_high_and_turning_with_three_cameras_and_an_actor_build():

@@ -5,6 +5,10 @@ user's armature and fitted with its DOF (core/mocap/to_dof.py). That costs tens 
 result is cached per rig (keyed by the rest skeleton and the DOF layout) in the user cache folder
 (MOCAP_CACHE_DIR, else ~/.cache/markerless_mocap).
 
+The pose excerpts (core/data/poses) are single moments of many more kinds of motion (dance, martial
+arts, acrobatics, getting up, everyday actions): they widen the prior's density, and since they are
+not continuous motion they never train the dynamics.
+
 `exclude` leaves out a window of a clip (in frames at the capture rate), so a sample scene made from
 that clip is never tracked with a prior that has seen its own poses.
 """
@@ -19,6 +23,7 @@ from ..mocap.bvh import read_bvh
 from ..mocap.to_dof import dof_sequence_from_clip
 
 MOTION_DIR = Path(__file__).resolve().parents[1] / "data" / "motion"
+POSES_DIR = Path(__file__).resolve().parents[1] / "data" / "poses"
 EXCLUDE_MARGIN = 15  # frames kept away on each side of an excluded window
 
 
@@ -84,6 +89,27 @@ def training_sequences(body, fps=30.0, exclude=None, window=40, stride=30, max_w
     return sequences
 
 
+def excerpt_poses(body, paths=None, progress=None):
+    """(N,D) poses of the pose excerpts (POSES_DIR) on this body, cached per rig like the clips."""
+    paths = sorted(POSES_DIR.glob("*.bvh")) if paths is None else [Path(p) for p in paths]
+    if not paths:
+        return np.zeros((0, len(body.dof_names)))
+    key = _body_key(body, {"excerpts": [p.name for p in paths], "version": 1})
+    cached = cache_dir() / f"poses_{key}.npy"
+    if cached.exists():
+        return np.load(cached)
+    poses = []
+    for i, path in enumerate(paths):
+        if progress is not None:
+            progress(i / len(paths), f"mapping pose excerpt {i + 1} of {len(paths)} onto the rig")
+        poses.append(dof_sequence_from_clip(body, read_bvh(path))[0])
+    poses = np.concatenate(poses)
+    tmp = cached.with_suffix(".tmp.npy")
+    np.save(tmp, poses)
+    os.replace(tmp, cached)
+    return poses
+
+
 def scene_exclusion(capture_folder):
     """For the bundled sample scenes: the clip window the scene was made from (scene_info.json)."""
     info_path = Path(capture_folder) / "scene_info.json"
@@ -112,8 +138,9 @@ def fit_dynamics(body, sequences, gamma=0.8):
     return LinearAR3(coeffs, offset, sigma)
 
 
-def build_motion_models(body, fps=30.0, exclude=None, seed=0, n_samples=200, progress=None):
-    """(anatomical prior, AR(3) dynamics) trained on the bundled clips mapped onto this body.
+def build_motion_models(body, fps=30.0, exclude=None, seed=0, n_samples=200, progress=None, poses=False):
+    """(anatomical prior, AR(3) dynamics) trained on the bundled clips mapped onto this body; the prior
+    also on the pose excerpts when poses=True.
 
     progress(fraction, text), fraction in [0, 1]: the clips take most of the time the first time a rig
     is seen; after that they come from the cache."""
@@ -121,8 +148,10 @@ def build_motion_models(body, fps=30.0, exclude=None, seed=0, n_samples=200, pro
 
     report = progress or (lambda fraction, text: None)
     sequences = training_sequences(body, fps=fps, exclude=exclude,
-                                   progress=lambda f, text: report(0.9 * f, text))
+                                   progress=lambda f, text: report(0.7 * f, text))
+    excerpts = excerpt_poses(body, progress=lambda f, text: report(0.7 + 0.2 * f, text)) if poses else None
     report(0.9, "fitting the anatomical prior and the dynamics")
-    prior = AnatomicalPrior.fit(np.concatenate(sequences), body.prior_groups, n_samples=n_samples, seed=seed)
+    training = np.concatenate(sequences if excerpts is None else sequences + [excerpts])
+    prior = AnatomicalPrior.fit(training, body.prior_groups, n_samples=n_samples, seed=seed)
     prior.bounded_by(body.lower, body.upper)
     return prior, fit_dynamics(body, sequences)
