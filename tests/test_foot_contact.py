@@ -99,7 +99,8 @@ def test_locking_holds_each_planted_point_still_on_the_floor_and_changes_only_th
     before, after = body.joint_positions(poses), body.joint_positions(pinned)
     assert report["floor"]["source"] == "calibration" and report["contacts"], report
     contacts = detect_contacts(before, foot_list, fit_floor(before, foot_list, FPS), FPS, frames)
-    assert [c.to_dict(foot_list, frames) for c in contacts] == report["contacts"] + report["left_as_tracked"]
+    reported = report["contacts"] + report["following_their_path"] + report["left_as_tracked"]
+    assert sorted(map(str, (c.to_dict(foot_list, frames) for c in contacts))) == sorted(map(str, reported))
     slide_before, slide_after = [], []
     for c in contacts:
         bone = foot_list[c.foot].points[c.point]
@@ -133,6 +134,32 @@ def test_the_legs_refit_stays_within_its_bound_of_the_tracked_pose(walk, locked)
     over = np.all(np.stack(list(heights.values())) >= 0, axis=0)  # frames with every foot point above the floor
     assert over.any()
     np.testing.assert_array_equal(tight[over], poses[over])
+
+
+def test_a_contact_that_cannot_be_held_still_follows_its_smoothed_path_within_the_bound(walk, monkeypatch):
+    """With a bound of 8 mm, the walk's right stance at frames 34-41 cannot be held still (the take drifts 10 mm over
+    it); it follows its path averaged over FOLLOW_FRAMES instead of staying as tracked: less slide, the leg within
+    the bound. With following off, it is left as tracked."""
+    from markerless_mocap.core.tracking import foot_lock
+
+    body, _, _, poses, frames = walk
+    bound = 0.008
+    pinned, report = lock_feet(body, poses, frames, FPS, max_shift=bound)
+    followed = report["following_their_path"]
+    assert followed and report["follow_frames"] == foot_lock.FOLLOW_FRAMES
+    before, after = body.joint_positions(poses), body.joint_positions(pinned)
+    for c in followed:
+        bone = body.skeleton.bone_names.index(c["bone"])
+        a, z = np.searchsorted(frames, c["frames"])
+        slide = [np.linalg.norm(np.diff(j[a:z + 1, bone, :2], axis=0), axis=1).mean() for j in (before, after)]
+        assert slide[1] < 0.75 * slide[0], (c, slide)
+    for k, foot in enumerate(feet(body)):
+        lift = np.maximum(0.0, -np.stack([h for (kk, _), h in _heights(body, before).items() if kk == k])).max(axis=0)
+        moved = np.linalg.norm(after[:, foot.leg_bones] - before[:, foot.leg_bones], axis=-1).max(axis=1)
+        assert np.all(moved <= bound + lift + 1e-3), moved.max()
+    monkeypatch.setattr(foot_lock, "FOLLOW_FRAMES", None)
+    _, without = lock_feet(body, poses, frames, FPS, max_shift=bound)
+    assert without["following_their_path"] == [] and all(c in without["left_as_tracked"] for c in followed)
 
 
 def test_a_floor_that_is_not_the_calibrations_is_found_and_the_feet_held_on_it(walk, locked):

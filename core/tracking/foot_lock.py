@@ -8,7 +8,10 @@ so the foot does not jump. On every frame, a contact point below the floor is ra
 the take's pose (core/evidence/keypoint_fit.py, fit_to_points); the rest of the body is not touched.
 
 The tracker's evidence still has the last word: a contact whose pinning would move the leg's joints farther than
-MAX_LEG_SHIFT from where the take has them (beyond what raising the foot onto the floor asks) is left as tracked.
+MAX_LEG_SHIFT from where the take has them (beyond what raising the foot onto the floor asks) is not held still. It
+is held on its own smoothed path instead (a moving average over FOLLOW_FRAMES frames): a seated person's foot that
+shuffles or a stance that drifts keeps its drift and loses only the frame-to-frame jitter. A contact that even this
+moves too far is left as tracked.
 Measured against the images' own evidence (docs/defaults.md, "MAX_LEG_SHIFT"): within it, the pinned legs reproject
 onto the learned landmarks as well as the take's do.
 """
@@ -24,6 +27,9 @@ BLEND_FRAMES = 3
 # (docs/defaults.md, "MAX_LEG_SHIFT").
 MAX_LEG_SHIFT = 0.02
 MOVED = 1e-5  # a frame whose targets are this close to the take keeps its pose (metres)
+# A contact that cannot be held still follows its path averaged over this many frames (docs/defaults.md,
+# "FOLLOW_FRAMES"); None leaves it as tracked.
+FOLLOW_FRAMES = 9
 
 
 class _Heads:
@@ -45,8 +51,18 @@ def _tangential(p, normal):
     return p - (p @ normal)[..., None] * normal
 
 
-def corrections(joints, foot_list, contacts, floor, frames, blend=BLEND_FRAMES):
-    """(F, n_feet, n_points, 3) displacement along the floor that pins each contact, faded in and out around it."""
+def smoothed_path(points, window):
+    """(n,3) points averaged over `window` frames centred on each (the window shrinks at the ends)."""
+    half = window // 2
+    c = np.vstack([np.zeros((1, points.shape[1])), np.cumsum(points, axis=0)])
+    lo = np.maximum(np.arange(len(points)) - half, 0)
+    hi = np.minimum(np.arange(len(points)) + half + 1, len(points))
+    return (c[hi] - c[lo]) / (hi - lo)[:, None]
+
+
+def corrections(joints, foot_list, contacts, floor, frames, blend=BLEND_FRAMES, following=()):
+    """(F, n_feet, n_points, 3) displacement along the floor that pins each contact, faded in and out around it;
+    the contacts in `following` are moved onto their smoothed path (FOLLOW_FRAMES) instead of held still."""
     F = len(joints)
     n_pts = max(len(f.points) for f in foot_list)
     out = np.zeros((F, len(foot_list), n_pts, 3))
@@ -55,7 +71,8 @@ def corrections(joints, foot_list, contacts, floor, frames, blend=BLEND_FRAMES):
     for c in contacts:
         p = joints[c.first:c.stop, foot_list[c.foot].points[c.point]]
         tan = _tangential(p, floor.normal)
-        out[c.first:c.stop, c.foot, c.point] = tan.mean(axis=0) - tan
+        held = smoothed_path(tan, FOLLOW_FRAMES) if c in following else tan.mean(axis=0)
+        out[c.first:c.stop, c.foot, c.point] = held - tan
         inside[c.first:c.stop, c.foot, c.point] = True
     faded = out.copy()
     for c in contacts:
@@ -110,11 +127,12 @@ def lock_feet(body, poses, frames, fps, height=CONTACT_HEIGHT, speed=CONTACT_SPE
     floor = fit_floor(joints, foot_list, fps, speed) if floor is None else floor
     contacts = detect_contacts(joints, foot_list, floor, fps, frames, height, speed)
     out = poses.copy()
-    kept, rejected = [], []
+    kept, rejected, followed = [], [], []
     for k, foot in enumerate(foot_list):  # the legs are refitted apart: each moves only its own foot
         mine = [c for c in contacts if c.foot == k]
-        while True:  # drop the contacts whose pinning moves the leg too far, until none does
-            shift = corrections(joints, foot_list, mine, floor, frames, blend)
+        following = []
+        while True:  # contacts whose pinning moves the leg too far follow their path, then are dropped
+            shift = corrections(joints, foot_list, mine, floor, frames, blend, following)
             targets, lift = _targets(joints, foot, k, shift, floor)
             leg = _refit(body, poses, foot, targets, joints)
             moved = body.joint_positions(leg)[:, foot.leg_bones]
@@ -123,9 +141,12 @@ def lock_feet(body, poses, frames, fps, height=CONTACT_HEIGHT, speed=CONTACT_SPE
                        if np.any(distance[max(c.first - blend, 0):c.stop + blend] > max_shift)]
             if not too_far:
                 break
-            rejected += too_far
-            mine = [c for c in mine if c not in too_far]
-        kept += mine
+            dropped = [c for c in too_far if c in following or FOLLOW_FRAMES is None]
+            following = [c for c in following if c not in dropped] + [c for c in too_far if c not in dropped]
+            rejected += dropped
+            mine = [c for c in mine if c not in dropped]
+        kept += [c for c in mine if c not in following]
+        followed += following
         out[:, foot.leg_dofs] = leg[:, foot.leg_dofs]
     report = {
         "floor": floor.to_dict(),
@@ -133,9 +154,10 @@ def lock_feet(body, poses, frames, fps, height=CONTACT_HEIGHT, speed=CONTACT_SPE
         "blend_frames": int(blend),
         "clearance_m": {name: round(float(c), 4) for f in foot_list for name, c in zip(f.names, f.clearance)},
         "contacts": [c.to_dict(foot_list, frames) for c in kept],
+        "following_their_path": [c.to_dict(foot_list, frames) for c in followed], "follow_frames": FOLLOW_FRAMES,
         "left_as_tracked": [c.to_dict(foot_list, frames) for c in rejected],
     }
     return out, report
 
 
-__all__ = ["BLEND_FRAMES", "MAX_LEG_SHIFT", "corrections", "lock_feet"]
+__all__ = ["BLEND_FRAMES", "FOLLOW_FRAMES", "MAX_LEG_SHIFT", "corrections", "lock_feet", "smoothed_path"]
