@@ -26,7 +26,7 @@ REST_START_GAIN = 0.01
 
 def triangulate(cameras, uv, weight, min_weight=MIN_WEIGHT):
     """DLT per point over the views where its weight passes: uv (C,K,2), weight (C,K) -> (K,3), ok (K,)."""
-    return _dlt(*_projections_and_ideal(cameras, uv), weight, min_weight)
+    return dlt_batched(*_projections_and_ideal(cameras, uv), weight, min_weight)
 
 
 def _projections_and_ideal(cameras, uv):
@@ -35,7 +35,7 @@ def _projections_and_ideal(cameras, uv):
             np.stack([cam.undistort_points(uv[c]) for c, cam in enumerate(cameras)]))
 
 
-def _dlt(P, ideal, weight, min_weight):
+def dlt_batched(P, ideal, weight, min_weight):
     """All points' DLT systems in one batched SVD: P (C,3,4), ideal (undistorted) pixels (C,K,2), weight
     (C,K). A view under min_weight contributes zero rows, which leave the solution (the null space of
     A^T A) as it is without them. A landmark without pixels (NaN: not found in that view) counts as weightless."""
@@ -61,10 +61,10 @@ def _dlt(P, ideal, weight, min_weight):
 def resolve_swaps(cameras, uv, weight, swap, max_views=10):
     """Per left/right pair, the views whose sides are swapped: of every choice of a minority of views to
     swap, the one whose triangulation reprojects best. Returns uv, weight with those views' pairs swapped."""
-    return _resolve_swaps(cameras, uv, weight, swap, max_views)[:2]
+    return resolve_swaps_with_projections(cameras, uv, weight, swap, max_views)[:2]
 
 
-def _resolve_swaps(cameras, uv, weight, swap, max_views=10):
+def resolve_swaps_with_projections(cameras, uv, weight, swap, max_views=10):
     """resolve_swaps, also returning the projection matrices and the ideal pixels (swapped alike) it used."""
     uv, weight = uv.copy(), weight.copy()
     C = weight.shape[0]
@@ -80,7 +80,7 @@ def _resolve_swaps(cameras, uv, weight, swap, max_views=10):
         for t, flip in enumerate(flips):
             order[flip, 2 * t:2 * t + 2] = [b, a]
         rows = np.arange(C)[:, None]
-        X, ok = _dlt(P, ideal[rows, order], weight[rows, order], MIN_WEIGHT)
+        X, ok = dlt_batched(P, ideal[rows, order], weight[rows, order], MIN_WEIGHT)
         good = ok.reshape(-1, 2).all(axis=1)
         if not good.any():
             continue
@@ -158,8 +158,8 @@ def limb_landmark_fit(body, rig_points, pose, X, ok, dofs):
 
 def triangulated_landmarks(cameras, targets, rig_points):
     """The frame's landmarks in 3D: (K,3) points and (K,) ok, left/right swaps resolved per view."""
-    _, weight, P, ideal = _resolve_swaps(cameras, targets.uv, targets.weight, rig_points.swap)
-    return _dlt(P, ideal, weight, MIN_WEIGHT)
+    _, weight, P, ideal = resolve_swaps_with_projections(cameras, targets.uv, targets.weight, rig_points.swap)
+    return dlt_batched(P, ideal, weight, MIN_WEIGHT)
 
 
 def limb_distances_3d(rig_points, world_points, X, ok):

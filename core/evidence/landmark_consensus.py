@@ -9,7 +9,7 @@ from itertools import combinations
 
 import numpy as np
 
-from .keypoint_fit import MIN_WEIGHT, _dlt, _resolve_swaps
+from .keypoint_fit import MIN_WEIGHT, dlt_batched, resolve_swaps_with_projections
 
 # a view agrees with a 3D point when its landmark lies within this share of the person's size in that view of the
 # point's projection [DESIGN] (docs/defaults.md, "Landmarks another person gave")
@@ -33,14 +33,14 @@ def disagreeing_landmarks(cameras, uv, weight, person_px, swap, predicted=None, 
     agree_share = AGREE_SHARE if agree_share is None else agree_share
     if C < 3:
         return np.zeros((C, K), bool)
-    resolved_uv, resolved_w, P, ideal = _resolve_swaps(cameras, uv, weight, swap)
+    resolved_uv, resolved_w, P, ideal = resolve_swaps_with_projections(cameras, uv, weight, swap)
     seen = resolved_w >= MIN_WEIGHT
     tol = agree_share * np.asarray(person_px, dtype=np.float64)[:, None]
     proposals = []
     for i, j in combinations(range(C), 2):
         pair = np.zeros_like(resolved_w)
         pair[[i, j]] = resolved_w[[i, j]]
-        X, ok = _dlt(P, ideal, pair, MIN_WEIGHT)
+        X, ok = dlt_batched(P, ideal, pair, MIN_WEIGHT)
         proposals.append(np.where(ok[:, None], X, np.nan))
     if predicted is not None:
         proposals.append(np.asarray(predicted, dtype=np.float64))
