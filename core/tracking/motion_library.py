@@ -94,7 +94,7 @@ def excerpt_poses(body, paths=None, progress=None):
     paths = sorted(POSES_DIR.glob("*.bvh")) if paths is None else [Path(p) for p in paths]
     if not paths:
         return np.zeros((0, len(body.dof_names)))
-    key = _body_key(body, {"excerpts": [p.name for p in paths], "version": 1})
+    key = _body_key(body, {"excerpts": [hashlib.sha1(p.read_bytes()).hexdigest() for p in paths], "version": 1})
     cached = cache_dir() / f"poses_{key}.npy"
     if cached.exists():
         return np.load(cached)
