@@ -1,7 +1,7 @@
 """Foot contact and foot locking (core/tracking/foot_contact.py, core/tracking/foot_lock.py): the contacts of the
 walk's true motion, a tracked walk's planted feet held still and on the floor by refitting only the legs within
-their bound (at a small cost in the tracker's own evidence), a drifting contact following its path, a floor that is not the calibration's z = 0, the result folder's files, the command line's options and
-the Track panel's."""
+their bound (at a small cost in the tracker's own evidence), a drifting contact following its path, a floor that
+is not the calibration's z = 0, the result folder's files, the command line's options and the Track panel's."""
 import json
 
 import numpy as np
