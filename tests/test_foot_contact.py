@@ -173,7 +173,8 @@ def test_a_floor_that_is_not_the_calibrations_is_found_and_the_feet_held_on_it(w
     # the same steps (the fitted floor sits where the tracked feet stand, 1-2 cm above z = 0: a step may split)
     assert abs(len(report["contacts"]) - len(locked[1]["contacts"])) <= 2
     lowest = min(h.min() for h in _heights(body, body.joint_positions(pinned)).values())
-    assert lowest > floor["offset_m"] - 0.005
+    # within 1 cm of it (issue 43's bound): the knee held (KNEE_HOLD), a sunk foot may stay a few mm under
+    assert lowest > floor["offset_m"] - 0.01
     # A floor the caller gives is the one used.
     given = Floor(np.array([0.0, 0.0, 1.0]), 0.10, "capture", {})
     again, again_report = lock_feet(body, raised, frames, FPS, floor=given)

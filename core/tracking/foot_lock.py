@@ -3,9 +3,10 @@
 For each contact (core/tracking/foot_contact.py) the planted point is held where the take puts it on average over
 the contact, along the floor; its height stays the take's (a heel rising as the step rolls onto the toes is
 motion, not slide). The correction a contact needs fades in and out over BLEND_FRAMES frames on either side,
-so the foot does not jump. On every frame, a contact point below the floor is raised onto it. The leg's DOFs
-(hip, knee, ankle) are then refitted by least squares so its foot points reach their targets, starting from
-the take's pose (core/evidence/keypoint_fit.py, fit_to_points); the rest of the body is not touched.
+so the foot does not jump. On every frame, a contact point below the floor is raised towards it. The leg's DOFs
+(hip, knee, ankle) are then refitted by least squares so its foot points reach their targets while its knee stays
+near the take's (KNEE_HOLD), starting from the take's pose (core/evidence/keypoint_fit.py, fit_to_points); the
+rest of the body is not touched.
 
 The tracker's evidence still has the last word: a contact whose pinning would move the leg's joints farther than
 MAX_LEG_SHIFT from where the take has them (beyond what raising the foot onto the floor asks) is not held still. It
@@ -32,14 +33,22 @@ MOVED = 1e-5  # a frame whose targets are this close to the take keeps its pose 
 FOLLOW_FRAMES = 9
 
 
-class _Heads:
-    """The bone heads `fit_to_points` moves onto their targets (its rig_points interface)."""
+# The refit also holds the knee where the take has it, its distance weighted this much against the foot points':
+# a sunk foot is raised by bending the knee and ankle, not by swinging the thigh, and where that cannot reach the
+# floor it stays a few mm under it (docs/defaults.md, "KNEE_HOLD").
+KNEE_HOLD = 0.5
 
-    def __init__(self, bones):
+
+class _Heads:
+    """The bone heads `fit_to_points` moves onto their targets (its rig_points interface), each scaled by its
+    weight (the targets are scaled alike, so a weight scales that head's residual)."""
+
+    def __init__(self, bones, weights):
         self.bones = np.asarray(bones, dtype=np.int64)
+        self.weights = np.asarray(weights, dtype=np.float64)
 
     def world(self, body, poses):
-        return body.joint_positions(np.atleast_2d(poses))[:, self.bones]
+        return body.joint_positions(np.atleast_2d(poses))[:, self.bones] * self.weights[:, None]
 
 
 def _fade(n):
@@ -108,11 +117,13 @@ def _refit(body, poses, foot, targets, joints, fit_max_nfev=30):
     from ..evidence.keypoint_fit import fit_to_points
 
     out = poses.copy()
-    heads = _Heads(foot.points)
+    knee = body.skeleton.index[body.roles[f"{foot.side[0]}_knee"][0]]
+    heads = _Heads(np.r_[foot.points, knee], np.r_[np.ones(len(foot.points)), KNEE_HOLD])
     moved = np.linalg.norm(targets - joints[:, foot.points], axis=-1).max(axis=1) > MOVED
-    ok = np.ones(len(foot.points), bool)
+    ok = np.ones(len(foot.points) + 1, bool)
     for t in np.flatnonzero(moved):
-        out[t], _ = fit_to_points(body, heads, poses[t], targets[t], ok, dofs=foot.leg_dofs, max_nfev=fit_max_nfev)
+        aims = np.vstack([targets[t], KNEE_HOLD * joints[t, knee]])
+        out[t], _ = fit_to_points(body, heads, poses[t], aims, ok, dofs=foot.leg_dofs, max_nfev=fit_max_nfev)
     return out
 
 
@@ -160,4 +171,4 @@ def lock_feet(body, poses, frames, fps, height=CONTACT_HEIGHT, speed=CONTACT_SPE
     return out, report
 
 
-__all__ = ["BLEND_FRAMES", "FOLLOW_FRAMES", "MAX_LEG_SHIFT", "corrections", "lock_feet", "smoothed_path"]
+__all__ = ["BLEND_FRAMES", "FOLLOW_FRAMES", "KNEE_HOLD", "MAX_LEG_SHIFT", "corrections", "lock_feet", "smoothed_path"]
