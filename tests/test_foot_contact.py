@@ -39,6 +39,14 @@ def locked(walk):
     return pinned, report
 
 
+def _assert_legs_within(body, before, after, bound):
+    """No leg joint moved farther than `bound` from the take, beyond what raising its foot onto the floor asks."""
+    for k, foot in enumerate(feet(body)):
+        lift = np.maximum(0.0, -np.stack([h for (kk, _), h in _heights(body, before).items() if kk == k])).max(axis=0)
+        moved = np.linalg.norm(after[:, foot.leg_bones] - before[:, foot.leg_bones], axis=-1).max(axis=1)
+        assert np.all(moved <= bound + lift + 1e-3), moved.max()
+
+
 def _heights(body, joints):
     """{(foot, point): height of the point above the floor less its clearance (F,)} for z = 0."""
     return {(k, j): joints[:, b, 2] - f.clearance[j] for k, f in enumerate(feet(body)) for j, b in enumerate(f.points)}
@@ -123,10 +131,7 @@ def test_the_legs_refit_stays_within_its_bound_of_the_tracked_pose(walk, locked)
     body, _, _, poses, frames = walk
     pinned, _ = locked
     before, after = body.joint_positions(poses), body.joint_positions(pinned)
-    for k, foot in enumerate(feet(body)):
-        lift = np.maximum(0.0, -np.stack([h for (kk, _), h in _heights(body, before).items() if kk == k])).max(axis=0)
-        moved = np.linalg.norm(after[:, foot.leg_bones] - before[:, foot.leg_bones], axis=-1).max(axis=1)
-        assert np.all(moved <= MAX_LEG_SHIFT + lift + 1e-3), moved.max()
+    _assert_legs_within(body, before, after, MAX_LEG_SHIFT)
     # A bound no pinning meets: every contact is left as tracked; only the feet under the floor are raised onto it.
     tight, report = lock_feet(body, poses, frames, FPS, max_shift=0.001)
     assert report["contacts"] == [] and report["left_as_tracked"]
@@ -153,10 +158,7 @@ def test_a_contact_that_cannot_be_held_still_follows_its_smoothed_path_within_th
         a, z = np.searchsorted(frames, c["frames"])
         slide = [np.linalg.norm(np.diff(j[a:z + 1, bone, :2], axis=0), axis=1).mean() for j in (before, after)]
         assert slide[1] < 0.75 * slide[0], (c, slide)
-    for k, foot in enumerate(feet(body)):
-        lift = np.maximum(0.0, -np.stack([h for (kk, _), h in _heights(body, before).items() if kk == k])).max(axis=0)
-        moved = np.linalg.norm(after[:, foot.leg_bones] - before[:, foot.leg_bones], axis=-1).max(axis=1)
-        assert np.all(moved <= bound + lift + 1e-3), moved.max()
+    _assert_legs_within(body, before, after, bound)
     monkeypatch.setattr(foot_lock, "FOLLOW_FRAMES", None)
     _, without = lock_feet(body, poses, frames, FPS, max_shift=bound)
     assert without["following_their_path"] == [] and all(c in without["left_as_tracked"] for c in followed)

@@ -60,6 +60,7 @@ class Foot:
     clearance: np.ndarray   # (len(points),) metres above the sole at rest
     leg_dofs: np.ndarray    # DOF indices of the leg
     leg_bones: np.ndarray   # bones whose heads the leg's DOFs move (the knee and below)
+    knee: int               # the knee's bone index (its head is the knee joint)
 
 
 def feet(body):
@@ -92,7 +93,7 @@ def feet(body):
         leg_dofs = np.array([i for i, d in enumerate(body.dofs) if d.role in roles], dtype=np.int64)
         knee = sk.index[body.roles[f"{s}_knee"][0]]
         below = np.array([b for b in range(sk.n_bones) if sk.is_ancestor(knee, b)], dtype=np.int64)
-        out.append(Foot(side, points, [sk.bone_names[b] for b in points], clearance, leg_dofs, below))
+        out.append(Foot(side, points, [sk.bone_names[b] for b in points], clearance, leg_dofs, below, knee))
     return out
 
 

@@ -117,12 +117,11 @@ def _refit(body, poses, foot, targets, joints, fit_max_nfev=30):
     from ..evidence.keypoint_fit import fit_to_points
 
     out = poses.copy()
-    knee = body.skeleton.index[body.roles[f"{foot.side[0]}_knee"][0]]
-    heads = _Heads(np.r_[foot.points, knee], np.r_[np.ones(len(foot.points)), KNEE_HOLD])
+    heads = _Heads(np.r_[foot.points, foot.knee], np.r_[np.ones(len(foot.points)), KNEE_HOLD])
     moved = np.linalg.norm(targets - joints[:, foot.points], axis=-1).max(axis=1) > MOVED
     ok = np.ones(len(foot.points) + 1, bool)
     for t in np.flatnonzero(moved):
-        aims = np.vstack([targets[t], KNEE_HOLD * joints[t, knee]])
+        aims = np.vstack([targets[t], KNEE_HOLD * joints[t, foot.knee]])
         out[t], _ = fit_to_points(body, heads, poses[t], aims, ok, dofs=foot.leg_dofs, max_nfev=fit_max_nfev)
     return out
 
