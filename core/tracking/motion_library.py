@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic_files import atomic_path
 from ..mocap.bvh import read_bvh
 from ..mocap.to_dof import dof_sequence_from_clip
 
@@ -83,9 +84,8 @@ def training_sequences(body, fps=30.0, exclude=None, window=40, stride=30, max_w
         for s in starts:
             poses, _ = dof_sequence_from_clip(body, clip, frames=np.arange(s, s + window))
             sequences.append(poses)
-    tmp = cached.with_suffix(".tmp.npz")
-    np.savez(tmp, **{f"seq_{i}": s for i, s in enumerate(sequences)})
-    os.replace(tmp, cached)
+    with atomic_path(cached) as tmp:
+        np.savez(tmp, **{f"seq_{i}": s for i, s in enumerate(sequences)})
     return sequences
 
 
@@ -104,9 +104,8 @@ def excerpt_poses(body, paths=None, progress=None):
             progress(i / len(paths), f"mapping pose excerpt {i + 1} of {len(paths)} onto the rig")
         poses.append(dof_sequence_from_clip(body, read_bvh(path))[0])
     poses = np.concatenate(poses)
-    tmp = cached.with_suffix(".tmp.npy")
-    np.save(tmp, poses)
-    os.replace(tmp, cached)
+    with atomic_path(cached) as tmp:
+        np.save(tmp, poses)
     return poses
 
 
@@ -147,8 +146,9 @@ def build_motion_models(body, fps=30.0, exclude=None, seed=0, n_samples=200, pro
     from ..energy.prior import AnatomicalPrior
 
     report = progress or (lambda fraction, text: None)
+    clips_share = 0.7 if poses else 0.9  # of the progress bar; the excerpts, when used, take the rest up to 0.9
     sequences = training_sequences(body, fps=fps, exclude=exclude,
-                                   progress=lambda f, text: report(0.7 * f, text))
+                                   progress=lambda f, text: report(clips_share * f, text))
     excerpts = excerpt_poses(body, progress=lambda f, text: report(0.7 + 0.2 * f, text)) if poses else None
     report(0.9, "fitting the anatomical prior and the dynamics")
     training = np.concatenate(sequences if excerpts is None else sequences + [excerpts])
