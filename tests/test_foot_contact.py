@@ -9,7 +9,7 @@ import pytest
 
 from markerless_mocap.core.tracking.foot_contact import (CONTACT_HEIGHT, Floor, FootContactError, along_floor_speed,
                                                          check_speed, detect_contacts, feet, fit_floor, planted)
-from markerless_mocap.core.tracking.foot_lock import MAX_LEG_SHIFT, lock_feet
+from markerless_mocap.core.tracking.foot_lock import FOLLOW_FRAMES, MAX_LEG_SHIFT, lock_feet, smoothed_path
 
 FPS = 30.0
 UP = np.array([0.0, 0.0, 1.0])
@@ -109,15 +109,24 @@ def test_locking_holds_each_planted_point_still_on_the_floor_and_changes_only_th
     contacts = detect_contacts(before, foot_list, fit_floor(before, foot_list, FPS), FPS, frames)
     reported = report["contacts"] + report["following_their_path"] + report["left_as_tracked"]
     assert sorted(map(str, (c.to_dict(foot_list, frames) for c in contacts))) == sorted(map(str, reported))
-    slide_before, slide_after = [], []
+    held = set(map(str, report["contacts"]))
+    slide = {True: ([], []), False: ([], [])}  # held still / following: (before, after) per frame
     for c in contacts:
         bone = foot_list[c.foot].points[c.point]
         xy = after[c.first:c.stop, bone, :2]
-        # the point stays within 5 mm of where it is held (the ankle's and the toes' holds share one leg)
-        assert np.linalg.norm(xy - xy.mean(axis=0), axis=1).max() < 0.005
-        slide_after.append(np.linalg.norm(np.diff(xy, axis=0), axis=1))
-        slide_before.append(np.linalg.norm(np.diff(before[c.first:c.stop, bone, :2], axis=0), axis=1))
-    assert np.concatenate(slide_after).mean() < 0.25 * np.concatenate(slide_before).mean()
+        is_held = str(c.to_dict(foot_list, frames)) in held
+        slide[is_held][0].append(np.linalg.norm(np.diff(before[c.first:c.stop, bone, :2], axis=0), axis=1))
+        slide[is_held][1].append(np.linalg.norm(np.diff(xy, axis=0), axis=1))
+        if is_held:
+            # the point stays within 5 mm of where it is held (the ankle's and the toes' holds share one leg)
+            assert np.linalg.norm(xy - xy.mean(axis=0), axis=1).max() < 0.005
+        else:  # one that would move the leg too far held still follows its smoothed path instead
+            path = smoothed_path(before[c.first:c.stop, bone, :2], FOLLOW_FRAMES)
+            assert np.linalg.norm(xy - path, axis=1).max() < 0.005
+    assert slide[True][0], "some contact is held still"
+    assert np.concatenate(slide[True][1]).mean() < 0.3 * np.concatenate(slide[True][0]).mean()
+    if slide[False][0]:  # the jitter goes, the slow drift stays
+        assert np.concatenate(slide[False][1]).mean() < 0.6 * np.concatenate(slide[False][0]).mean()
     lowest_before = min(h.min() for h in _heights(body, before).values())
     lowest_after = min(h.min() for h in _heights(body, after).values())
     assert lowest_after > -0.005 and lowest_after > lowest_before  # no foot sinks into the floor
@@ -125,6 +134,28 @@ def test_locking_holds_each_planted_point_still_on_the_floor_and_changes_only_th
     others = np.setdiff1d(np.arange(body.n_dof), legs)
     np.testing.assert_array_equal(pinned[:, others], poses[:, others])
     assert np.all(pinned >= body.lower - 1e-9) and np.all(pinned <= body.upper + 1e-9)
+
+
+def test_the_locked_walk_slides_within_a_millimetre_a_frame_of_the_truth_and_stands_on_the_floor(walk, locked):
+    """The issue's bounds on the bundled walk: where the true foot is planted (within 3 cm of the floor, slower
+    than 0.2 m/s; tools/foot_slide.py), the locked foot moves within 1 mm per frame of the true one's slide, and no
+    foot point is more than 1 cm under the floor."""
+    body, truth, truth_frames, poses, frames = walk
+    pinned, _ = locked
+    after = body.joint_positions(pinned)
+    at = np.searchsorted(truth_frames, frames)
+    slide_truth, slide_locked = [], []
+    for foot in feet(body):
+        for bone, clearance in zip(foot.points, foot.clearance):
+            t = truth[at, bone]
+            planted = (t[:, 2] - clearance < 0.03) & (along_floor_speed(t, FPS, UP) < 0.2)
+            pairs = planted[1:] & planted[:-1] & (np.diff(frames) == 1)
+            slide_truth.append(np.linalg.norm(np.diff(t[:, :2], axis=0), axis=1)[pairs])
+            slide_locked.append(np.linalg.norm(np.diff(after[:, bone, :2], axis=0), axis=1)[pairs])
+    truth_mm, locked_mm = (1000 * np.concatenate(v).mean() for v in (slide_truth, slide_locked))
+    print(f"\nplanted slide, mm per frame: truth {truth_mm:.2f}, locked {locked_mm:.2f}")
+    assert locked_mm < truth_mm + 1.0
+    assert min(h.min() for h in _heights(body, after).values()) > -0.01
 
 
 def test_the_legs_refit_stays_within_its_bound_of_the_tracked_pose(walk, locked):

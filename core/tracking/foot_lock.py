@@ -26,7 +26,7 @@ from .foot_contact import CONTACT_HEIGHT, CONTACT_SPEED, detect_contacts, feet, 
 BLEND_FRAMES = 3
 # A pinning that moves a leg joint farther than this from the take (metres, the floor's lift apart) is not taken
 # (docs/defaults.md, "MAX_LEG_SHIFT").
-MAX_LEG_SHIFT = 0.02
+MAX_LEG_SHIFT = 0.015
 MOVED = 1e-5  # a frame whose targets are this close to the take keeps its pose (metres)
 # A contact that cannot be held still follows its path averaged over this many frames (docs/defaults.md,
 # "FOLLOW_FRAMES"); None leaves it as tracked.
