@@ -5,6 +5,7 @@ import time
 from pathlib import Path
 
 from ..core.actor.frames import DEFAULT_FRAMES
+from ..core.results.views_without_landmarks import views_without_landmarks_message
 from ..core.tracking.foot_contact import CONTACT_SPEED
 from ..core.tracking.options import OPTIONS, settings_from_choices
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
@@ -245,6 +246,9 @@ def run(args):
         from ..addon import gpu_likelihood
         gpu_likelihood.release()
     finish_and_list(session, args, f"tracked {session.n_done} frames")
+    said = views_without_landmarks_message(session.writer.info)
+    if said:
+        print(said, file=sys.stderr)
     return 0
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import bpy
 
 from ..core.errors import InputError
+from ..core.results.views_without_landmarks import views_without_landmarks_message
 from .failures import USER_ERRORS, user_message
 from .modal_run import begin_modal, end_modal, is_cancel_key, show_status
 from .worker_job import WorkerJob
@@ -351,7 +352,9 @@ class MOCAP_OT_track(bpy.types.Operator):
             locked = ", feet locked" if summary and "joints_unpinned" in summary else ""
             props.status = f"Tracked {solved} frames, {job.seconds_per_frame:.1f} s/frame{smoothed}{locked}"
             report = f"Tracked {solved} frames{smoothed}{locked}; results in {props.last_output}"
-        self.report({"INFO"}, report)
+        writer = getattr(job.session, "writer", None)  # one actor's session (several actors: theirs are expected)
+        said = views_without_landmarks_message(writer.info) if writer is not None and summary is not None else None
+        self.report({"WARNING"} if said else {"INFO"}, f"{report}. {said}" if said else report)
         return {"FINISHED"}
 
     # ---- synchronous: background mode, scripts, tests

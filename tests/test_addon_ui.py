@@ -9,6 +9,7 @@ import importlib
 import sys
 import threading
 import time
+import types
 from collections import namedtuple
 from pathlib import Path
 
@@ -928,3 +929,18 @@ def test_the_status_says_the_take_was_smoothed_and_its_feet_locked(fake_track, m
     monkeypatch.setattr(FakeSession, "finish", finish)
     assert bpy.ops.mocap.track() == {"FINISHED"}
     assert m.status.startswith("Tracked 3 frames, ") and m.status.endswith(" s/frame, smoothed at 8 Hz, feet locked")
+
+
+def test_track_warns_where_a_views_landmarks_were_left_out(fake_track, monkeypatch, capfd):
+    """A take whose report lists views without landmarks (someone in front of the actor) ends with a warning that
+    names the views, the frames and the fix, not with the plain 'Tracked' line."""
+    bpy, _, _, _, _ = fake_track
+    shared = {str(f): ["cam1"] for f in range(10, 16)}
+    monkeypatch.setattr(FakeSession, "writer", types.SimpleNamespace(info={"views_shared": shared}), raising=False)
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    out = capfd.readouterr()
+    said = out.out + out.err
+    assert "landmarks left out: cam1 on frames 10-15" in said and "--armature ACTOR --armature OTHER" in said
+    monkeypatch.setattr(FakeSession, "writer", types.SimpleNamespace(info={}), raising=False)
+    assert bpy.ops.mocap.track() == {"FINISHED"}
+    assert "landmarks left out" not in "".join(capfd.readouterr())

@@ -1,0 +1,42 @@
+"""The end-of-take word on the views whose landmarks were left out (core/results/views_without_landmarks.py)."""
+import json
+
+import pytest
+from scene_helpers import scene_dir
+
+from markerless_mocap.core.results.views_without_landmarks import (frame_spans, views_without_landmarks,
+                                                                    views_without_landmarks_message)
+
+
+def test_frames_become_spans_per_camera_and_rare_ones_are_not_named():
+    assert frame_spans([12, 3, 4, 5, 10, 11]) == [(3, 5), (10, 12)]
+    assert frame_spans([]) == []
+    shared = {"3": ["cam1"], "4": ["cam1", "cam2"], "5": ["cam1"], "9": ["cam1"], "10": ["cam1"], "11": ["cam2"]}
+    assert views_without_landmarks(shared, min_frames=3) == {"cam1": [(3, 5), (9, 10)]}
+    assert views_without_landmarks(shared, min_frames=2) == {"cam1": [(3, 5), (9, 10)], "cam2": [(4, 4), (11, 11)]}
+
+
+def test_the_message_names_the_views_and_frames_and_the_fix_for_one_actor():
+    report = {"views_shared": {str(f): ["cam2"] for f in (20, 21, 22, 23, 24, 30)}}
+    said = views_without_landmarks_message(report)
+    assert "cam2 on frames 20-24, 30" in said and "--armature ACTOR --armature OTHER" in said
+    several = views_without_landmarks_message(report, actors=2)
+    assert "cam2 on frames 20-24, 30" in several and "--armature" not in several
+    assert views_without_landmarks_message({}) is None
+    assert views_without_landmarks_message({"views_shared": {"4": ["cam1"], "5": ["cam1"]}}) is None  # too few
+
+
+def test_track_says_where_a_passer_by_took_a_view(tmp_path, capsys):
+    """crossing_dev, frames 9-18: the passer-by walks between the actor and cam1 from frame 10; the landmark model
+    there returns the passer-by, the views' agreement drops cam1's landmarks, and `track` says so at the end."""
+    pytest.importorskip("bpy")
+    from markerless_mocap.operators.cli import main
+
+    scene, out = scene_dir("crossing_dev"), tmp_path / "r"
+    code = main(["track", "--scene", str(scene / "subject.blend"), "--capture", str(scene), "--out", str(out),
+                 "--frames", "9-18", "--preset", "preview", "--no-export", "--no-overlays", "--seed", "0"])
+    assert code == 0
+    shared = json.loads((out / "report.json").read_text()).get("views_shared", {})
+    cam1 = [int(f) for f, names in shared.items() if "cam1" in names]
+    assert len(cam1) >= 5 and set(cam1) <= set(range(10, 19)), shared
+    assert "landmarks left out: cam1 on frames" in capsys.readouterr().err
