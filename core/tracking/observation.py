@@ -12,7 +12,6 @@ from typing import NamedTuple
 import numpy as np
 
 from ..evidence import BackgroundModel, compute_view_features
-from ..evidence.crowded_crops import look_past_strangers
 from ..evidence.mask_cleanup import check_mask
 from ..evidence.view_features import feature_size, resize_mask
 
@@ -117,16 +116,14 @@ class Observation(NamedTuple):
     features: list  # ViewFeatures per camera, at the energy's resolution
     evidence: list | None  # ViewEvidence per camera (learned landmarks and mask); None without learned evidence
     fine_silhouettes: list | None  # per camera at the local fit's resolution; None when it is the energy's
-    looked_again: tuple = ()  # the cameras whose crop held someone else, looked at again without them
 
 
 class FrameObserver:
     """Observes frames for the energy. It reads nothing of the tracker's state, only the capture, the background
     models and the landmark model, so the next frame can be observed in its worker thread (prefetch / take)."""
 
-    def __init__(self, capture, body, backgrounds, scales, learned_evidence, learned_mask, diffuse, proxy=None):
+    def __init__(self, capture, body, backgrounds, scales, learned_evidence, learned_mask, diffuse):
         self.capture, self.body, self.backgrounds = capture, body, backgrounds
-        self.proxy = proxy  # the body's mesh: where it is expected in a crop (core/evidence/crowded_crops.py)
         self.scales = list(scales)  # the energy's resolution, then the local fit's if it is finer
         self.learned_evidence = learned_evidence  # run the landmark model
         self.learned_mask = learned_mask  # its person mask is the silhouette (else background subtraction)
@@ -135,18 +132,11 @@ class FrameObserver:
         self._pool = None  # the worker
         self._pending = None  # (frame, guide, future)
 
-    def observe(self, frame, guide_poses, look_past=False):
-        """`frame`'s Observation, the learned model's crops placed around `guide_poses` (absolute). `look_past`
-        (once a frame is solved, so that the guide is where the actor is): a crop whose person mask holds someone
-        else far from the body expected there is looked at again with them painted over."""
+    def observe(self, frame, guide_poses):
+        """`frame`'s Observation, the learned model's crops placed around `guide_poses` (absolute)."""
         images = self.capture.frames.read(frame)
         cams = self.capture.cameras
         evidence = self.evidence(images, guide_poses) if self.learned_evidence else None
-        again = []
-        if evidence is not None and look_past and self.proxy is not None:
-            vertices = self.proxy.deform(self.body, np.atleast_2d(guide_poses))
-            evidence, again = look_past_strangers(self.landmark_model, [images[cam.name] for cam in cams], evidence,
-                                                  cams, list(vertices), np.asarray(self.proxy.faces))
         learned = evidence if evidence is not None and self.learned_mask else [None] * len(cams)
         masks = []  # per camera: a silhouette per scale
         for cam, ev in zip(cams, learned):
@@ -160,7 +150,7 @@ class FrameObserver:
         feats = [compute_view_features(images[cam.name], None, scale=self.scales[0], diffuse=self.diffuse,
                                        silhouette=m[0])
                  for cam, m in zip(cams, masks)]
-        return Observation(feats, evidence, fine, tuple(cams[i].name for i in again))
+        return Observation(feats, evidence, fine)
 
     def evidence(self, images, guide_poses):
         """Learned evidence per view, from crops around the projected joints of `guide_poses`."""
@@ -181,8 +171,7 @@ class FrameObserver:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mocap-observe")
-        # only frames after a solved one are observed ahead: their guide is where the actor is, so look past others
-        self._pending = (int(frame), guide, self._pool.submit(self.observe, frame, guide, True))
+        self._pending = (int(frame), guide, self._pool.submit(self.observe, frame, guide))
 
     def take(self, frame, guide_poses):
         """The prefetched Observation of `frame` around `guide_poses` (the same object), or None. Waits for any

@@ -75,7 +75,7 @@ class Tracker:
         self.root = RootAnchor(body.root_rotation_dofs)
         scales = [self.scale] + ([self.refine_scale] if self.refines and self.refine_scale != self.scale else [])
         self.observer = FrameObserver(capture, body, self.backgrounds, scales, weights.needs_learned_evidence,
-                                      weights.mask == "learned", diffuse=self.uses_color, proxy=self.proxy)
+                                      weights.mask == "learned", diffuse=self.uses_color)
         self.local_fit = LocalFit(body, self.proxy, capture.cameras, self.energy, self.space, self.root, self.scale,
                                   self.refine_scale, s.refine_iterations)
         self.limb_recovery = LimbRecovery(body, capture.cameras, self.energy, self.space, self.root, s.seed,
@@ -94,7 +94,6 @@ class Tracker:
         self.others = None  # the other tracked actors this frame (other_actors.OtherActors), or None
         self.views_shared = {}  # {frame: [camera names]} whose evidence was another actor's
         self.landmarks_set_aside = {}  # {frame: {camera name: landmarks}} the other views disagreed with
-        self.views_looked_again = {}  # {frame: [camera names]} whose crop held someone else (crowded_crops.py)
 
     def _optimizer_kwargs(self):
         s = self.settings
@@ -175,8 +174,7 @@ class Tracker:
             guide_poses = planned[1] if planned is not None and planned[0] == int(frame) else expected_poses(
                 self._last_absolute(2), self.body.default_pose())
         observation = self.observer.take(frame, guide_poses)
-        self.observation = observation if observation is not None else self.observer.observe(
-            frame, guide_poses, look_past=bool(self.history))
+        self.observation = observation if observation is not None else self.observer.observe(frame, guide_poses)
         feats = self.observation.features
         self.energy.set_frame(feats, self.evidence)
         apart = self._set_apart_others(guide_poses)
@@ -185,7 +183,6 @@ class Tracker:
         # this frame's last observation decides (the first frame is observed twice: rough placement, then fitted)
         _record(self.views_shared, frame, [n for n, s in zip(names, apart | taken) if s])
         _record(self.landmarks_set_aside, frame, {n: int(k) for n, k in zip(names, aside) if k})
-        _record(self.views_looked_again, frame, list(self.observation.looked_again))
         predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
         targets = self.energy.targets
         self.views_in_play = views_in_play(
