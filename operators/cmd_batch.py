@@ -409,6 +409,7 @@ class Batch:
             if code == 0:
                 run.state = "done"
                 write_json(self.args.out / run.take.name / STITCHED_FILE, self.stitch_signature(run))
+                self._say_views_without_landmarks(run)
             else:
                 text = Path(run.stitch_log.name).read_text(errors="replace").splitlines()
                 mine = [line for line in text if line.startswith("markerless_mocap")] or text[-1:]
@@ -429,6 +430,17 @@ class Batch:
             run.stitch = subprocess.Popen(self.stitch_argv(run), stdout=run.stitch_log, stderr=subprocess.STDOUT,
                                           stdin=subprocess.DEVNULL, env=command_environment())
             run.state = "stitching"
+
+    def _say_views_without_landmarks(self, run):
+        """The stitched take's end-of-take line about views whose landmarks were left out, as `track` prints it."""
+        from ..core.results.views_without_landmarks import views_without_landmarks_message
+        try:
+            report = json.loads((self.args.out / run.take.name / "report.json").read_text())
+        except (OSError, ValueError):
+            return
+        said = views_without_landmarks_message(report)
+        if said:
+            print(f"batch: take {run.take.name!r}: {said}", file=sys.stderr, flush=True)
 
     def _stitched_already(self, run):
         out = self.args.out / run.take.name

@@ -35,6 +35,8 @@ def run(args):
     from ..core.batch.chunk_folder import ChunkError, ChunkFolder
     from ..core.batch.plan import plan_chunks, plan_to_json
     from ..core.batch.stitch import stitch
+    from ..core.batch.stitch_report import per_frame_facts
+    from ..core.results.views_without_landmarks import views_without_landmarks_message
     from .failures import USER_ERRORS, cli_failure
     from .track_session import TrackSession
 
@@ -55,6 +57,7 @@ def run(args):
                              "not from the take's seeds (core/batch/seed.py): delete their folders, run seed-chunks, "
                              "then track them again")
         estimates = [f.estimates() for f in folders]
+        facts = per_frame_facts(plan, [f.report() for f in folders])
         scene = open_subject(args.scene)
         armature = find_armature(scene, args.armature)
         session = TrackSession(scene, armature, args.capture, args.out, settings, frames=frames,
@@ -74,9 +77,13 @@ def run(args):
         "overlap_mean_joint_mm": _mean([o["mean_joint_mm"] for o in overlaps]),
         "note": "per frame, 'seconds' is the time of the chunk the frame was kept from; the overlaps' "
                 "mean_joint_mm: the 15 joints' mean distance between the two chunks' solved poses there"}
+    writer.info.update(facts)
     writer.write()
     session.key_all()
     finish_and_list(session, args, f"stitched {len(plan)} chunks, {len(stitched)} frames")
+    said = views_without_landmarks_message(writer.info)
+    if said:
+        print(said, file=sys.stderr)
     return 0
 
 

@@ -114,6 +114,13 @@ def test_chunks_stitched_equal_the_take_in_one_piece_within_the_bound(local_batc
     print("stitched vs one piece, per frame (mm):", np.round(gap, 1))
     assert np.all(gap[:6] < 1e-6)  # chunk 0 starts where the one-piece run does: the same frames
     assert gap.mean() < ONE_PIECE_BOUND_MM and gap.max() < ONE_PIECE_FRAME_BOUND_MM
+    # and so its per-frame report there: what the tracker set aside or left out, frame by frame
+    from markerless_mocap.core.batch.stitch_report import FRAME_MAPS
+    whole_report = json.loads((folder / "report.json").read_text())
+    stitched_report = json.loads((tmp / "out" / "walk" / "report.json").read_text())
+    for key in FRAME_MAPS:
+        first_chunk = {f: v for f, v in (whole_report.get(key) or {}).items() if int(f) < 6}
+        assert {f: v for f, v in (stitched_report.get(key) or {}).items() if int(f) < 6} == first_chunk, key
 
 
 def _start(cmd, log):

@@ -121,3 +121,26 @@ def test_a_chunk_missing_frames_is_named():
     del chunks[1][15]
     with pytest.raises(ChunkError, match="chunk 1 .*lacks frames 15-15"):
         stitch(body, plan, chunks)
+
+
+def test_the_chunks_reports_are_carried_frame_by_frame_from_the_chunk_that_keeps_the_frame():
+    from markerless_mocap.core.batch.stitch_report import per_frame_facts
+
+    plan = plan_chunks(0, 29, 10, 3, 2)   # tracked 0-11, 7-21, 17-29; kept 0-9, 10-19, 20-29
+    assert [c.keep for c in plan] == [(0, 9), (10, 19), (20, 29)]
+    reports = [
+        {"views_shared": {"4": ["cam2"], "11": ["cam1"]},          # frame 11: chunk 0's overlap, not kept
+         "landmarks_set_aside": {"9": {"cam1": 2}, "10": {"cam3": 1}},
+         "limb_recoveries": [{"frame": 5, "limbs": ["l_arm"], "kept": True}]},
+        {"views_shared": {"8": ["cam4"], "12": ["cam2", "cam3"]},  # frame 8: chunk 1's warm-up, not kept
+         "landmarks_set_aside": {"10": {"cam1": 4}},
+         "root_gate": [{"frame": 18, "speed_m_per_s": 30.0}, {"frame": 9, "speed_m_per_s": 12.0}]},
+        {},                                                       # a chunk that recorded nothing
+    ]
+    facts = per_frame_facts(plan, reports)
+    assert facts["views_shared"] == {"4": ["cam2"], "12": ["cam2", "cam3"]}
+    assert facts["landmarks_set_aside"] == {"9": {"cam1": 2}, "10": {"cam1": 4}}
+    assert facts["limb_recoveries"] == [{"frame": 5, "limbs": ["l_arm"], "kept": True}]
+    assert facts["root_gate"] == [{"frame": 18, "speed_m_per_s": 30.0}]
+    assert "views_left_out" not in facts
+    assert per_frame_facts(plan, [{}, {}, {}]) == {}

@@ -27,6 +27,7 @@ from .plan import frame_range_name
 
 FORMAT = 1  # of chunk.json and of the key: a change of either starts the chunks afresh
 INFO_FILE = "chunk.json"
+REPORT_FILE = "report.json"  # the chunk's own report, as `track` writes it
 TAKE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 CHUNKS_FOLDER = "_chunks"  # batch's default place for the chunk folders, inside its --out
 
@@ -106,6 +107,16 @@ class ChunkFolder:
             return json.loads((self.path / INFO_FILE).read_text())
         except (OSError, ValueError) as exc:
             raise ChunkError(f"chunk {self.path}: {INFO_FILE} cannot be read ({exc}); delete the folder and run "
+                             "the chunk again") from None
+
+    def report(self):
+        """The chunk's report.json as a dict ({} when it has none: chunks tracked before it was kept)."""
+        try:
+            return json.loads((self.path / REPORT_FILE).read_text())
+        except FileNotFoundError:
+            return {}
+        except (OSError, ValueError) as exc:
+            raise ChunkError(f"chunk {self.path}: {REPORT_FILE} cannot be read ({exc}); delete the folder and run "
                              "the chunk again") from None
 
     def estimates(self):
