@@ -311,6 +311,10 @@ def run_cast(args, scene, names, choice):
     print(f"tracked {cast.n_done} frames of {len(armatures)} actors -> {args.out}", file=sys.stderr)
     for name, files in written.items():
         print(f"  {name}: {files}", file=sys.stderr)
+    for armature, session in zip(armatures, cast.sessions):
+        said = views_without_landmarks_message(session.writer.info, actors=len(armatures))
+        if said:
+            print(f"{armature.name}: {said}", file=sys.stderr)
     return 0
 
 
