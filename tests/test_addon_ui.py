@@ -6,6 +6,7 @@ settings reach the session, `finish()` always runs, cancel keeps the solved fram
 worker are reported instead of swallowed.
 """
 import importlib
+import json
 import sys
 import threading
 import time
@@ -858,6 +859,14 @@ def test_a_finished_batch_is_keyed_from_its_stitched_poses(addon_module_name, bp
     m = send("done", _EndedProcess(0))
     assert m.last_error == "" and m.last_output == str(result)
     assert m.status.startswith("Tracked 5 frames in 2 chunks") and str(result) in m.status
+    assert "landmarks left out" not in m.status  # no report.json here: nothing to say
+    views = {str(f): ["cam2"] for f in range(3, 8)}  # the stitched report: cam2's landmarks left out on frames 3-7
+    (result / "report.json").write_text(json.dumps({"views_shared": views}))
+    m = send("done", _EndedProcess(0))
+    said = _module(addon_module_name, "core.results.views_without_landmarks").views_without_landmarks_message(
+        {"views_shared": views})
+    assert m.status.endswith(said) and "cam2 on frames 3-7" in m.status
+    (result / "report.json").unlink()
     assert compat.keyed_frame_range(arm) == (4, 8) and (scene.frame_start, scene.frame_end) == (4, 8)
     root = arm.pose.bones[body.skeleton.bone_names[body.root_bone]]
     expected = body.local_bases(poses)[:, body.root_bone, :3, 3]
