@@ -1,21 +1,18 @@
 """The actor's motion on a character of other proportions (issue 15): rotations as solved, the root path
 rescaled, bones never stretched; through a BVH export and re-import in Blender."""
-import importlib.util
 import json
 
 import numpy as np
 import pytest
 
 from rig_helpers import REPO, subject_blend_path
+from tool_helpers import load_tool
 
 pytestmark = pytest.mark.bpy
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("character_check", REPO / "tools" / "character_check.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("character_check")
 
 
 @pytest.mark.parametrize("factors,overall", [({}, 1.2 / 1.6657), ({"thigh": 0.8, "shin": 0.75, "spine": 0.8,

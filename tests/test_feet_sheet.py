@@ -2,22 +2,19 @@
 On walk's bundled result (default settings, foot locking on) a pinned foot point stays within a few pixels over its
 contact in every view, and less than the same point before locking (tools/feet_sheet.py on it: locked 1.0-2.1 px,
 unpinned 2.4-4.3 px)."""
-import importlib.util
 import json
 from pathlib import Path
 
 import cv2
 import numpy as np
+from tool_helpers import load_tool
 
 REPO = Path(__file__).resolve().parents[1]
 WALK = REPO / "sample_scenes" / "walk"
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("feet_sheet", REPO / "tools" / "feet_sheet.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("feet_sheet")
 
 
 def test_pinned_contacts_stay_put_in_the_images_and_move_less_than_unpinned():

@@ -141,9 +141,8 @@ def test_the_locked_walk_slides_within_a_millimetre_a_frame_of_the_truth_and_sta
     """The issue's bounds on the bundled walk, scored by tools/foot_slide.py (the figures docs/ quote): where the
     true foot is planted, the locked foot moves within 1 mm per frame of the true one's slide, and no foot point is
     more than 1 cm under the floor."""
-    import importlib.util
-
-    from scene_helpers import REPO, scene_dir
+    from scene_helpers import scene_dir
+    from tool_helpers import load_tool
 
     body, _, _, poses, frames = walk
     pinned, report = locked
@@ -151,9 +150,7 @@ def test_the_locked_walk_slides_within_a_millimetre_a_frame_of_the_truth_and_sta
     for name, take in (("joints.npz", pinned), ("joints_unpinned.npz", poses)):
         np.savez(tmp_path / name, names=names, frames=frames, positions=body.joint_positions(take))
     (tmp_path / "report.json").write_text(json.dumps({"foot_locking": report}))
-    spec = importlib.util.spec_from_file_location("foot_slide", REPO / "tools" / "foot_slide.py")
-    foot_slide = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(foot_slide)
+    foot_slide = load_tool("foot_slide")
     figures = foot_slide.figures(tmp_path, scene_dir("walk") / "gt_joints.npz")
     slide = figures["slide_mm"]
     print(f"\nplanted slide, mm per frame: truth {slide['truth']:.2f}, locked {slide['locked']:.2f}")

@@ -1,21 +1,14 @@
 """tools/hidden_landmarks.py's test of a point the body hides, on a square of two triangles in front of a camera:
 a point behind it by more than the margin is hidden, one just behind it or beside it is not, nor one the camera
 cannot see."""
-import importlib.util
-from pathlib import Path
-
 import numpy as np
+from tool_helpers import load_tool
 
 from markerless_mocap.core.capture.camera import Camera, rodrigues_to_matrix
 
-REPO = Path(__file__).resolve().parents[1]
-
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("hidden_landmarks", REPO / "tools" / "hidden_landmarks.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("hidden_landmarks")
 
 
 def test_a_point_behind_the_surface_by_more_than_the_margin_is_hidden():

@@ -1,6 +1,5 @@
 """Learned evidence: crop geometry, the BlazePose wrapper on a rendered frame, the keypoint term and the
 first frame from keypoints."""
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -587,14 +586,12 @@ def test_landmark_offsets_table_is_what_the_measuring_tool_finds():
     """LANDMARK_OFFSETS against tools/landmark_offsets.py --raw on walk and playground (every 4th frame here,
     every 2nd for the table): within 0.01 trunk (5 mm) per component."""
     pytest.importorskip("bpy")
-    import importlib.util
 
     from markerless_mocap.core.evidence.keypoints import LANDMARK_OFFSETS
 
-    repo = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("landmark_offsets", repo / "tools" / "landmark_offsets.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    from tool_helpers import load_tool
+
+    tool = load_tool("landmark_offsets")
     arrays = []
     for name in ("walk", "playground"):
         landmarks, result = tool.measure(scene_dir(name), 4, raw=True)

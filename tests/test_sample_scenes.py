@@ -762,13 +762,10 @@ ALL_SCENES = SCENES + ["pose2sim_demo"]
 
 
 def _portable_subject():
-    import importlib.util
 
-    spec = importlib.util.spec_from_file_location(
-        "portable_subject", Path(__file__).resolve().parents[1] / "tools" / "portable_subject.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from tool_helpers import load_tool
+
+    return load_tool("portable_subject")
 
 
 @pytest.mark.bpy
