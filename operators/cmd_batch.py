@@ -433,12 +433,9 @@ class Batch:
 
     def _say_views_without_landmarks(self, run):
         """The stitched take's end-of-take line about views whose landmarks were left out, as `track` prints it."""
-        from ..core.results.views_without_landmarks import views_without_landmarks_message
-        try:
-            report = json.loads((self.args.out / run.take.name / "report.json").read_text())
-        except (OSError, ValueError):
-            return
-        said = views_without_landmarks_message(report)
+        from ..core.results.views_without_landmarks import views_without_landmarks_in_result
+
+        said = views_without_landmarks_in_result(self.args.out / run.take.name)
         if said:
             print(f"batch: take {run.take.name!r}: {said}", file=sys.stderr, flush=True)
 

@@ -303,23 +303,14 @@ def finish(scene, run, progress):
     props.progress = 1.0
     took = _duration(time.time() - run.started)
     props.status = f"Tracked {len(frames)} frames in {props.chunks_total} chunks in {took}, keyed; results in {result}"
-    said = _views_without_landmarks(result)
+    from ..core.results.views_without_landmarks import views_without_landmarks_in_result
+
+    said = views_without_landmarks_in_result(result)
     if said:  # as Track on this Blender says it (operators/track.py)
         props.status += f". {said}"
     if failed:
         props.last_error = "; ".join(failed)
     return True
-
-
-def _views_without_landmarks(result):
-    """The stitched take's line about views whose landmarks were left out (its report.json), or None."""
-    import json
-
-    from ..core.results.views_without_landmarks import views_without_landmarks_message
-    try:
-        return views_without_landmarks_message(json.loads((result / "report.json").read_text()))
-    except (OSError, ValueError):
-        return None
 
 
 def _fitted_actor(result):

@@ -7,12 +7,8 @@ from tool_helpers import load_tool
 from markerless_mocap.core.capture.camera import Camera, rodrigues_to_matrix
 
 
-def _tool():
-    return load_tool("hidden_landmarks")
-
-
 def test_a_point_behind_the_surface_by_more_than_the_margin_is_hidden():
-    tool = _tool()
+    tool = load_tool("hidden_landmarks")
     K = np.array([[200.0, 0, 80], [0, 200.0, 60], [0, 0, 1]])
     camera = Camera("c", K, [], rodrigues_to_matrix([0, 0, 0]), [0, 0, 0], 160, 120)  # looks down +z
     square = np.array([[-0.3, -0.3, 2.0], [0.3, -0.3, 2.0], [0.3, 0.3, 2.0], [-0.3, 0.3, 2.0]])

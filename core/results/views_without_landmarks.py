@@ -6,6 +6,9 @@ Such a view is most often one where someone else stands in front of the actor (t
 that person), sometimes one where the actor hides its own limbs; either way the user learns which stretch of the
 take rests on fewer views.
 """
+import json
+from pathlib import Path
+
 from ..tracking.smoothing import consecutive_runs
 
 # A camera is named only when its landmarks were left out on at least this many frames [DESIGN]: the agreement
@@ -49,3 +52,13 @@ def views_without_landmarks_message(report, actors=1):
                     "(--armature ACTOR --armature OTHER, or Track Every Armature in the Subject panel): their body "
                     "then keeps out of the actor's.")
     return message
+
+
+def views_without_landmarks_in_result(folder):
+    """The line for a finished result folder (its report.json), or None when there is nothing to say or no report
+    to read (a batch's stitched take, read back by `batch` and the Track panel)."""
+    try:
+        report = json.loads((Path(folder) / "report.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return views_without_landmarks_message(report)
