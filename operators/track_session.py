@@ -184,6 +184,8 @@ class TrackSession:
             self.writer.info["first_frame_keypoint_fit"] = self.tracker.keypoint_fit
         if self.tracker.recoveries:
             self.writer.info["limb_recoveries"] = self.tracker.recoveries
+        if self.tracker.first_frame_review:  # the first frame replaced once the second was solved
+            self.writer.info["first_frame_review"] = self.tracker.first_frame_review
         if self.tracker.gated:  # solutions whose root moved faster than a person can, searched again
             self.writer.info["root_gate"] = self.tracker.gated
         if self.tracker.views_shared:  # views whose evidence was another tracked actor's (several actors)
@@ -236,6 +238,8 @@ class TrackSession:
         if smoothing is None and locking is None:
             if self.writer.holds_finished_take:  # a finished run smoothed or pinned: the solved take again
                 self.writer.write()
+            if est and self.writer.info.get("first_frame_review"):  # keyed before the second frame revised it
+                self._key_pose(est[0].frame, est[0].pose)
             return None
         joints = self.body.joint_positions(poses)
         if locking is not None:

@@ -23,6 +23,7 @@ from .anchor import RootAnchor
 from .checkpoint import optimizer_state, restore_optimizer
 from .first_frame import (KEYPOINT_INIT_TRANSLATION, KEYPOINT_INIT_YAW, keypoint_start, neutral_joints,
                           search_first_frame)
+from .first_frame_review import FirstFrameEvidence, reviewed
 from .limb_recovery import LimbRecovery
 from .local_fit import LocalFit
 from .observation import FrameObserver, background_models, expected_poses, guide_after_search, guide_before_search
@@ -94,6 +95,8 @@ class Tracker:
         self.others = None  # the other tracked actors this frame (other_actors.OtherActors), or None
         self.views_shared = {}  # {frame: [camera names]} whose evidence was another actor's
         self.landmarks_set_aside = {}  # {frame: {camera name: landmarks}} the other views disagreed with
+        self.first_evidence = None  # the searched first frame's evidence until the second frame reviews it
+        self.first_frame_review = None  # what the review changed (first_frame_review.reviewed), or None
 
     def _optimizer_kwargs(self):
         s = self.settings
@@ -283,6 +286,9 @@ class Tracker:
                 half_width, yaw_spread, polish=self.fit_locally if self.refines else None)
             estimate = self._refine(estimate) if self.refines else estimate
             pose = self.to_absolute(estimate)
+            energy = self.energy
+            self.first_evidence = FirstFrameEvidence(int(frame), self.observation, energy.targets, energy.keypoints,
+                                                     self.views_in_play.copy(), self.others)
         else:
             pose = np.asarray(initial_pose, float)
             evaluations = 0
@@ -327,8 +333,40 @@ class Tracker:
         if self.uses_color and lam > 0:
             self.energy.adapt_color_model(pose, lam)
         est = self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
+        if self.first_evidence is not None and self.refines:
+            self._review_first_frame()
         self.history = self.root.follow(self.history[-1], self.optimizer, self.history)
         return est
+
+    def _review_first_frame(self):
+        """Once the second frame is solved: its pose fitted locally to the first frame's images replaces the first
+        frame's pose where it explains them better and some joint moved far (first_frame_review.py). Without
+        colour, as the first frame's search: its colour model was made from the pose under review."""
+        first, self.first_evidence = self.first_evidence, None
+        if len(self.estimates) != 2 or len(self.history) < 2:
+            return
+        energy = self.energy
+        now = (self.observation, energy.targets, energy.keypoints, self.views_in_play, self.others)
+        self.observation, energy.targets, energy.keypoints, self.views_in_play, self.others = (
+            first.observation, first.targets, first.keypoints, first.views_in_play, first.others)
+        energy.set_view_weights(first.views_in_play.astype(np.float64))
+        try:
+            without_colour = dataclasses.replace(energy.weights, color=0.0)
+            before = self.history[-2]
+            candidate = self.fit_locally(self.history[-1])
+            scores = self._energy_fn(np.stack([before, candidate]), without_colour)
+        finally:
+            self.observation, energy.targets, energy.keypoints, self.views_in_play, self.others = now
+            energy.set_view_weights(self.views_in_play.astype(np.float64))
+        verdict = reviewed(self.body, self.to_absolute(before), scores[0], self.to_absolute(candidate), scores[1])
+        if verdict is None:
+            return
+        est = self.estimates[0]
+        est.pose = self.to_absolute(candidate)
+        est.joints = self.body.joint_positions(est.pose[None])[0]
+        est.energy = float(self.energy(est.pose[None])[0])
+        self.history[-2] = candidate
+        self.first_frame_review = {"frame": int(est.frame), **verdict}
 
     @property
     def recoveries(self):
