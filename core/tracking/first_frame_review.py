@@ -3,7 +3,8 @@ placement; the second starts from a solved pose and its search often finds what 
 wrong way round, a hand left at the hip). So the second frame's pose, fitted locally to the first frame's images,
 replaces the first frame's when it explains them better and moves some joint by more than REVIEW_DISTANCE: the
 first keyed frame is then right, and the next frame's prediction no longer starts from a wrong limb.
-Measured in docs/measurements.md, "The first frame looked at again".
+Measured in docs/measurements.md, "The first frame looked at again". A run resumed right after its first frame
+(`--resume`) has no first-frame images left to look at and keeps that frame as solved.
 """
 from dataclasses import dataclass
 
