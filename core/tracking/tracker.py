@@ -286,9 +286,10 @@ class Tracker:
                 half_width, yaw_spread, polish=self.fit_locally if self.refines else None)
             estimate = self._refine(estimate) if self.refines else estimate
             pose = self.to_absolute(estimate)
-            energy = self.energy
-            self.first_evidence = FirstFrameEvidence(int(frame), self.observation, energy.targets, energy.keypoints,
-                                                     self.views_in_play.copy(), self.others)
+            if self.refines:  # the review is a local fit: without one, nothing to keep the images for
+                energy = self.energy
+                self.first_evidence = FirstFrameEvidence(int(frame), self.observation, energy.targets,
+                                                         energy.keypoints, self.views_in_play.copy(), self.others)
         else:
             pose = np.asarray(initial_pose, float)
             evaluations = 0
@@ -333,7 +334,7 @@ class Tracker:
         if self.uses_color and lam > 0:
             self.energy.adapt_color_model(pose, lam)
         est = self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
-        if self.first_evidence is not None and self.refines:
+        if self.first_evidence is not None:
             self._review_first_frame()
         self.history = self.root.follow(self.history[-1], self.optimizer, self.history)
         return est
