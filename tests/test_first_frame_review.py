@@ -11,16 +11,14 @@ pytestmark = pytest.mark.slow
 
 
 def _walk_tracker():
-    from scene_helpers import scene_dir
+    from scene_helpers import ground_truth_poses, scene_dir
 
     from markerless_mocap.core.capture.capture import load_capture
     from markerless_mocap.core.tracking.motion_library import build_motion_models, scene_exclusion
     from markerless_mocap.core.tracking.settings import TrackingSettings
 
-    capture = load_capture(scene_dir("walk"))
-    from scene_helpers import ground_truth_poses
-
     body = ground_truth_poses("walk")[0]
+    capture = load_capture(scene_dir("walk"))
     prior, dynamics = build_motion_models(body, fps=capture.frames.fps, exclude=scene_exclusion(scene_dir("walk")))
     tracker = tracker_module.Tracker(body, capture, TrackingSettings(particles=100, iterations=8, prefetch=False),
                                      prior=prior, dynamics=dynamics)

@@ -19,7 +19,6 @@ REVIEW_DISTANCE = 0.1  # metres
 @dataclass
 class FirstFrameEvidence:
     """What the energy saw on the first frame, kept until the second is solved."""
-    frame: int
     observation: object  # observation.Observation
     targets: object  # the energy's image targets (the other actors set apart)
     keypoints: object  # its landmarks (others' and disagreeing ones left out)
@@ -28,8 +27,8 @@ class FirstFrameEvidence:
 
 
 def reviewed(body, first_pose, first_energy, candidate_pose, candidate_energy):
-    """The review's verdict on the first frame: {"frame joints moved_m", ...} as a dict when `candidate_pose`
-    (absolute) replaces `first_pose`, else None."""
+    """The review's verdict on the first frame: {"energy_before", "energy_after", "largest_joint_move_m"} when
+    `candidate_pose` (absolute) replaces `first_pose`, else None."""
     moved = float(np.linalg.norm(body.joint_positions(np.atleast_2d(candidate_pose))[0]
                                  - body.joint_positions(np.atleast_2d(first_pose))[0], axis=1).max())
     if not (candidate_energy < first_energy and moved > REVIEW_DISTANCE):

@@ -288,8 +288,8 @@ class Tracker:
             pose = self.to_absolute(estimate)
             if self.refines:  # the review is a local fit: without one, nothing to keep the images for
                 energy = self.energy
-                self.first_evidence = FirstFrameEvidence(int(frame), self.observation, energy.targets,
-                                                         energy.keypoints, self.views_in_play.copy(), self.others)
+                self.first_evidence = FirstFrameEvidence(self.observation, energy.targets, energy.keypoints,
+                                                         self.views_in_play.copy(), self.others)
         else:
             pose = np.asarray(initial_pose, float)
             evaluations = 0
@@ -356,6 +356,7 @@ class Tracker:
             before = self.history[-2]
             candidate = self.fit_locally(self.history[-1])
             scores = self._energy_fn(np.stack([before, candidate]), without_colour)
+            candidate_energy = float(self._energy_fn(candidate[None])[0])  # as the first frame's was recorded
         finally:
             self.observation, energy.targets, energy.keypoints, self.views_in_play, self.others = now
             energy.set_view_weights(self.views_in_play.astype(np.float64))
@@ -365,7 +366,7 @@ class Tracker:
         est = self.estimates[0]
         est.pose = self.to_absolute(candidate)
         est.joints = self.body.joint_positions(est.pose[None])[0]
-        est.energy = float(self.energy(est.pose[None])[0])
+        est.energy = candidate_energy
         self.history[-2] = candidate
         self.first_frame_review = {"frame": int(est.frame), **verdict}
 
