@@ -186,6 +186,8 @@ class TrackSession:
             self.writer.info["limb_recoveries"] = self.tracker.recoveries
         if self.tracker.first_frame_review:  # the first frame replaced once the second was solved
             self.writer.info["first_frame_review"] = self.tracker.first_frame_review
+        if self.tracker.turns:  # estimates left facing backwards, turned round (core/tracking/turned_round.py)
+            self.writer.info.setdefault("turned_round", {}).update({str(f): e for f, e in self.tracker.turns.items()})
         if self.tracker.gated:  # solutions whose root moved faster than a person can, searched again
             self.writer.info["root_gate"] = self.tracker.gated
         if self.tracker.views_shared:  # views whose evidence was another tracked actor's (several actors)

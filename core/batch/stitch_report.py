@@ -1,15 +1,15 @@
 """What the chunks' reports say frame by frame, carried into the stitched take's report.json.
 
 Each chunk's report.json records per frame which views the tracker left out or took the landmarks from, how many
-landmarks it set aside, which limbs it searched again and which solutions the root gate refused. The stitched take
-keeps, for every frame, what the chunk that gave it that frame recorded (core/batch/plan.py, `keep`), so a take
-tracked in chunks reports the same things as a take tracked in one piece, and `stitch` and `batch` can print the
-same end-of-take lines as `track`.
+landmarks it set aside, which limbs it searched again, which estimates it turned round and which solutions the
+root gate refused. The stitched take keeps, for every frame, what the chunk that gave it that frame recorded
+(core/batch/plan.py, `keep`), so a take tracked in chunks reports the same things as a take tracked in one piece,
+and `stitch` and `batch` can print the same end-of-take lines as `track`.
 """
 from __future__ import annotations
 
 # report.json keys holding {frame (str): value}
-FRAME_MAPS = ("views_shared", "landmarks_set_aside", "views_left_out")
+FRAME_MAPS = ("views_shared", "landmarks_set_aside", "views_left_out", "turned_round")
 # report.json keys holding [{"frame": int, ...}]
 FRAME_LISTS = ("limb_recoveries", "root_gate")
 

@@ -26,6 +26,7 @@ from .first_frame import (KEYPOINT_INIT_TRANSLATION, KEYPOINT_INIT_YAW, keypoint
 from .first_frame_review import FirstFrameEvidence, reviewed
 from .limb_recovery import LimbRecovery
 from .local_fit import LocalFit
+from .turned_round import TurnedRound
 from .observation import FrameObserver, background_models, expected_poses, guide_after_search, guide_before_search
 from .root_gate import RootGate
 from .settings import FrameEstimate, TrackingSettings
@@ -90,6 +91,8 @@ class Tracker:
         self.views_left_out = {}  # {frame: [camera names]} left out of the image terms that frame
         self.keypoint_fit = None  # the first frame's landmark fit: {"points", "rms_m"}
         self.history = []  # relative poses of the solved frames (most recent last)
+        self.turned = TurnedRound(body)
+        self.turns = {}  # {frame: energies} where the estimate's turned-round reflection was kept
         self.next_guide = None  # (frame, absolute poses) the next frame's crops are placed around
         self.estimates = []
         self.others = None  # the other tracked actors this frame (other_actors.OtherActors), or None
@@ -323,6 +326,8 @@ class Tracker:
         if self.refines:
             estimate = self._refine(estimate)
             energy, evaluations = float(self._energy_fn(estimate[None])[0]), evaluations + 1
+        if self.refines:  # before the limbs are looked at: a body facing backwards puts each on the other's landmarks
+            estimate, energy, evaluations = self._turn_round(estimate, energy, evaluations, frame)
         if self.evidence is not None:
             estimate, energy, evaluations = self.limb_recovery.recover(estimate, energy, evaluations, frame)
         # a root that moved faster than a person can is refused and the frame searched again (root_gate.py)
@@ -338,6 +343,22 @@ class Tracker:
             self._review_first_frame()
         self.history = self.root.follow(self.history[-1], self.optimizer, self.history)
         return est
+
+    def _turn_round(self, estimate, energy, evaluations, frame):
+        """The estimate's reflection through its frontal plane (turned_round.py), fitted locally, replaces it where
+        its energy is lower: a body left facing backwards by a fast turn finds its way back."""
+        mirrored = self.turned.reflected(self.to_absolute(estimate))
+        if mirrored is None:
+            return estimate, energy, evaluations
+        candidate = self.fit_locally(self.to_relative(mirrored))
+        candidate_energy = float(self._energy_fn(candidate[None])[0])
+        evaluations += 1
+        if not candidate_energy < energy:
+            return estimate, energy, evaluations
+        self.turns[int(frame)] = {"energy_before": float(energy), "energy_after": candidate_energy}
+        self._particles_follow(candidate - estimate)
+        self.history = [candidate] * len(self.history)  # the half turn is no motion to predict from
+        return candidate, candidate_energy, evaluations
 
     def _review_first_frame(self):
         """Once the second frame is solved: its pose fitted locally to the first frame's images replaces the first
