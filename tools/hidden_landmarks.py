@@ -40,8 +40,10 @@ def hidden_in_view(vertices, faces, camera, points, margin):
     return inside & (front < pz - margin)
 
 
-def measure(scene, result, margin, scale=0.25):
-    """Rows (frame, camera, point, hidden, distance share, visibility) and the rig points' landmark numbers."""
+def truth_and_landmarks(scene, result):
+    """The scene's subject body (bpy), its rig points, the truth's frames and poses on it, the cameras, and the
+    result's landmarks per frame in the cameras' order: (body, rig, frames, poses, cameras, uv, visibility,
+    landmark frames). tools/landmark_facing.py reads the same."""
     import bpy
 
     from markerless_mocap.addon.scene_bridge import body_from_blender, find_armature
@@ -52,13 +54,18 @@ def measure(scene, result, margin, scale=0.25):
 
     bpy.ops.wm.open_mainfile(filepath=str(scene / "subject.blend"))
     body = body_from_blender(find_armature(bpy.context.scene), None, bpy.context.scene)
-    rig = rig_keypoints(body)
     names, frames, positions = load_joints(scene / "gt_joints.npz")
     poses, _ = poses_from_joints(body, names, positions)
     cameras = read_calibration(find_calibration_file(scene))
     with np.load(result / "keypoints.npz") as saved:
         order = [list(saved["cameras"]).index(c.name) for c in cameras]
-        uv_all, vis_all = saved["uv"], saved["visibility"]
+        uv, visibility, landmark_frames = saved["uv"][:, order], saved["visibility"][:, order], saved["frames"]
+    return body, rig_keypoints(body), frames, poses, cameras, uv, visibility, landmark_frames
+
+
+def measure(scene, result, margin, scale=0.25):
+    """Rows (frame, camera, point, hidden, distance share, visibility) and the rig points' landmark numbers."""
+    body, rig, frames, poses, cameras, uv_all, vis_all, _ = truth_and_landmarks(scene, result)
     rows = []
     for i in range(1, len(frames)):
         vertices = body.deform(poses[i - 1][None])[0]
@@ -68,7 +75,7 @@ def measure(scene, result, margin, scale=0.25):
             hidden = hidden_in_view(vertices, body.faces, cam.scaled(scale), expected, margin)
             truth_uv = cam.project(true_points)
             size = np.ptp(truth_uv, axis=0).max()
-            uv, vis = uv_all[i, order[c]][rig.landmarks], vis_all[i, order[c]][rig.landmarks]
+            uv, vis = uv_all[i, c][rig.landmarks], vis_all[i, c][rig.landmarks]
             share = np.linalg.norm(uv - truth_uv, axis=1) / size
             for k in range(len(rig.landmarks)):
                 if np.isfinite(share[k]):

@@ -6,9 +6,10 @@
 - the landmarks read as a back: the left shoulder and hip lie on the image's left of the right ones, by more than
   --margin of the trunk's height in the picture (a front shows them the other way round).
 
-    .venv/bin/python tools/landmark_facing.py sample_scenes/dance RESULT [--armature Armature] [--frames 67-86]
+    .venv/bin/python tools/landmark_facing.py sample_scenes/dance RESULT [--frames 67-86]
 
-Needs bpy (the subject .blend gives the rig). docs/measurements.md, "Tried and not adopted", quotes its figures.
+Needs bpy (the subject .blend gives the rig; tools/hidden_landmarks.py reads the truth and the landmarks).
+docs/measurements.md, "Tried and not adopted", quotes its figures.
 """
 import argparse
 import sys
@@ -16,29 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from hidden_landmarks import truth_and_landmarks  # noqa: E402  (a sibling tool, not a package)
+
 TRUNK = (11, 12, 23, 24)  # BlazePose: left / right shoulder, left / right hip
 
 
-def view_rows(scene, result, armature):
+def view_rows(scene, result):
     """Per (frame, view): frame, view, sees the back, landmarks swapped, landmarks' back reading (signed, trunk
     heights), nose visibility."""
-    import bpy
-
-    from markerless_mocap.addon.scene_bridge import body_from_blender
-    from markerless_mocap.core.body.pose_fit import poses_from_joints
-    from markerless_mocap.core.capture.calibration import find_calibration_file, read_calibration
-    from markerless_mocap.core.evidence.keypoints import rig_keypoints
-    from markerless_mocap.core.results.result_folder import load_joints
-
-    bpy.ops.wm.open_mainfile(filepath=str(scene / "subject.blend"))
-    body = body_from_blender(bpy.data.objects[armature], None, bpy.context.scene)
-    rig = rig_keypoints(body)
-    names, frames, positions = load_joints(scene / "gt_joints.npz")
-    poses, _ = poses_from_joints(body, names, positions)
-    cameras = read_calibration(find_calibration_file(scene))
-    with np.load(result / "keypoints.npz") as saved:
-        order = [list(saved["cameras"]).index(c.name) for c in cameras]
-        uv_all, vis_all, kept = saved["uv"], saved["visibility"], saved["frames"]
+    body, rig, frames, poses, cameras, uv_all, vis_all, kept = truth_and_landmarks(scene, result)
     landmarks = list(rig.landmarks)
     trunk = [landmarks.index(k) for k in TRUNK]
     swapped = [landmarks.index(k) for k in (12, 11, 24, 23)]
@@ -54,11 +42,11 @@ def view_rows(scene, result, armature):
         facing /= np.linalg.norm(facing)
         centre = points[trunk].mean(axis=0)
         for c, camera in enumerate(cameras):
-            vis = vis_all[j, order[c]]
+            vis = vis_all[j, c]
             if vis[list(TRUNK)].min() < 0.1:
                 continue
             truth_uv = camera.project(points)
-            uv = uv_all[j, order[c]][rig.landmarks]
+            uv = uv_all[j, c][rig.landmarks]
             as_labelled = np.linalg.norm(uv[trunk] - truth_uv[trunk], axis=1).mean()
             as_swapped = np.linalg.norm(uv[swapped] - truth_uv[trunk], axis=1).mean()
             to_camera = camera.center - centre
@@ -76,11 +64,10 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("scene", type=Path)
     parser.add_argument("result", type=Path)
-    parser.add_argument("--armature", default="Armature")
     parser.add_argument("--margin", type=float, default=0.2)
     parser.add_argument("--frames", help="also count these frames per view, e.g. 67-86")
     args = parser.parse_args(argv)
-    rows, cameras = view_rows(args.scene, args.result, args.armature)
+    rows, cameras = view_rows(args.scene, args.result)
     back, lies, reading, nose = rows[:, 2] > 0, rows[:, 3] > 0, rows[:, 4], rows[:, 5]
     reads_back, reads_front = reading > args.margin, reading < -args.margin
     print(f"{args.scene.name}: {len(rows)} view-frames, {back.sum()} see the back, the landmarks' sides swapped on "
