@@ -3,7 +3,7 @@
 Front and back look alike to the silhouettes and the edges, and the landmark term lets each view swap left and
 right (single-view landmark models often call a back a front), so a body that falls behind a fast turn can
 settle facing backwards with its limbs exchanged: the person's reflection through their own frontal plane
-(docs/measurements.md, "Where dance is lost"). No small step leads back from there. This module builds that
+(docs/measurements.md, "Turned round"). No small step leads back from there. This module builds that
 reflection of a pose; the tracker fits it locally and keeps it where it explains the images better.
 """
 from __future__ import annotations
