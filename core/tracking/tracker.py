@@ -1,11 +1,12 @@
-"""The per-frame tracking loop: initialise, predict, optimise, refine, recover limbs, adapt colour, checkpoint.
+"""The per-frame tracking loop: initialise, predict, optimise, refine, turn round, recover limbs, adapt colour,
+checkpoint.
 
 The same loop serves the command line, the Blender modal operator and the tests. It never touches Blender: it
 reads a Capture, scores poses with an EnergyModel and hands each frame's estimate to a callback as soon as it is
 solved, so nothing solved is ever lost. Tracker coordinates the parts, each in its own module: observing a frame
 (observation.py), the root anchor the optimisers' poses are relative to (anchor.py), the first frame
-(first_frame.py), the local fit (local_fit.py), limb recovery (limb_recovery.py) and the checkpoint's plain data
-(checkpoint.py).
+(first_frame.py), the local fit (local_fit.py), a body left facing backwards (turned_round.py), limb recovery
+(limb_recovery.py) and the checkpoint's plain data (checkpoint.py).
 """
 import dataclasses
 import time
@@ -26,10 +27,10 @@ from .first_frame import (KEYPOINT_INIT_TRANSLATION, KEYPOINT_INIT_YAW, keypoint
 from .first_frame_review import FirstFrameEvidence, reviewed
 from .limb_recovery import LimbRecovery
 from .local_fit import LocalFit
-from .turned_round import TurnedRound
 from .observation import FrameObserver, background_models, expected_poses, guide_after_search, guide_before_search
 from .root_gate import RootGate
 from .settings import FrameEstimate, TrackingSettings
+from .turned_round import TurnedRound
 
 NEXT = object()  # Tracker.track's default next frame: the one after
 
@@ -326,7 +327,7 @@ class Tracker:
         if self.refines:
             estimate = self._refine(estimate)
             energy, evaluations = float(self._energy_fn(estimate[None])[0]), evaluations + 1
-        if self.refines:  # before the limbs are looked at: a body facing backwards puts each on the other's landmarks
+            # before the limbs are looked at: a body facing backwards would put each on the other's landmarks
             estimate, energy, evaluations = self._turn_round(estimate, energy, evaluations, frame)
         if self.evidence is not None:
             estimate, energy, evaluations = self.limb_recovery.recover(estimate, energy, evaluations, frame)
