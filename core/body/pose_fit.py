@@ -6,7 +6,7 @@ Jacobian computed in ONE batched FK call per iteration, warm-started frame to fr
 """
 import numpy as np
 
-from .rotations import matrix_to_rotvec
+from .rotations import best_rotation, matrix_to_rotvec
 
 
 def _residuals(body, poses, target_heads, target_rots, rot_bones, rot_weight, hold_weight=0.0):
@@ -60,18 +60,15 @@ def fit_pose(body, target_heads, x0, target_rots=None, rot_bones=(), rot_weight=
     return x, float(np.sqrt(head_residual @ head_residual / max(1, len(target_heads))))
 
 
-def initial_root(body, target_heads):
-    """Root translation + rotation vector that best align the rest pose with target head positions."""
-    x = body.default_pose()
-    rest = body.joint_positions(x[None])[0]
+def initial_root(body, target_heads, pose=None):
+    """Root translation + rotation vector that best align `pose` (default: the rest pose; its root rotation zero)
+    with target head positions: the pose with them set."""
+    x = body.default_pose() if pose is None else np.array(pose, dtype=np.float64)
+    heads = body.joint_positions(x[None])[0]
     r = body.root_bone
-    a = rest - rest[r]
-    b = target_heads - target_heads[r]
-    U, _, Vt = np.linalg.svd(b.T @ a)
-    d = np.sign(np.linalg.det(U @ Vt))
-    R = U @ np.diag([1, 1, d]) @ Vt
+    rotation = best_rotation(heads - heads[r], target_heads - target_heads[r])
     x[body.translation_dofs] = target_heads[r]
-    x[body.root_rotation_dofs] = matrix_to_rotvec(R)
+    x[body.root_rotation_dofs] = matrix_to_rotvec(rotation)
     return x
 
 

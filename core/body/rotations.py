@@ -90,6 +90,12 @@ def quaternions_to_rotvecs(q, near):
     return np.where(closer[:, None], other, principal)
 
 
+def best_rotation(source, target):
+    """The rotation R minimising sum |R source_i - target_i|^2 over two centred point sets (N,3) (Kabsch)."""
+    U, _, Vt = np.linalg.svd(target.T @ source)
+    return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+
+
 def orthonormalize(matrix):
     """Nearest rotation (SVD) of (...,3,3)."""
     u, _, vt = np.linalg.svd(matrix)

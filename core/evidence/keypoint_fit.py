@@ -12,7 +12,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .keypoints import LIMB_LANDMARKS
-from ..body.rotations import matrix_to_rotvec, rotvec_to_matrix
+from ..body.rotations import best_rotation, matrix_to_rotvec, rotvec_to_matrix
 
 MIN_WEIGHT = 0.2        # a landmark takes part in triangulation above this weight (every found view: see
                         # keypoints.VISIBILITY_FLOOR)
@@ -104,8 +104,7 @@ def align_root(body, rig_points, x, targets, ok):
     src = rig_points.world(body, x[None])[0][torso]
     dst = targets[torso]
     cs, cd = src.mean(axis=0), dst.mean(axis=0)
-    U, _, Vt = np.linalg.svd((dst - cd).T @ (src - cs))
-    R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    R = best_rotation(src - cs, dst - cd)
     out = np.array(x, dtype=np.float64)
     rd, td = body.root_rotation_dofs, body.translation_dofs
     out[rd] = matrix_to_rotvec(R @ rotvec_to_matrix(out[rd]))

@@ -12,8 +12,7 @@ import re
 
 import numpy as np
 
-from ..body.pose_fit import fit_pose
-from ..body.rotations import matrix_to_rotvec
+from ..body.pose_fit import fit_pose, initial_root
 
 _SIDES = {"Left": "Right", "Right": "Left", "left": "right", "right": "left"}
 
@@ -46,13 +45,6 @@ def frontal_normal(body, heads):
     normal = np.array([across[1], -across[0], 0.0])  # perpendicular to across in the floor plane
     length = np.linalg.norm(normal)
     return normal / length if length > 1e-9 else None
-
-
-def _kabsch(source, target):
-    """The rotation R minimising |R source_i - target_i| over centred point sets (N,3)."""
-    U, _, Vt = np.linalg.svd(target.T @ source)
-    d = np.sign(np.linalg.det(U @ Vt))
-    return U @ np.diag([1.0, 1.0, d]) @ Vt
 
 
 class TurnedRound:
@@ -110,11 +102,6 @@ class TurnedRound:
         start = body.default_pose()
         angles = np.array([d.kind == "angle" for d in body.dofs])
         start[angles] = (self.dof_sign * pose[self.dof_partner])[angles]
-        start = body.clamp(start)
-        heads = body.joint_positions(start[None])[0]
-        r = body.root_bone
-        rotation = _kabsch(heads - heads[r], targets - targets[r])
-        start[body.root_rotation_dofs] = matrix_to_rotvec(rotation)
-        start[body.translation_dofs] = targets[r]
+        start = initial_root(body, targets, body.clamp(start))
         fitted, _ = fit_pose(body, targets, start, hold_weight=0.01)
         return fitted
