@@ -9,9 +9,10 @@ from pathlib import Path
 
 def partial_path(path):
     """Where a result file is written before it is renamed into place: same folder (so the rename is
-    atomic), same extension (so exporters and video writers pick the right format)."""
+    atomic), same extension (so exporters and video writers pick the right format), this process's own (two
+    runs filling the same cache at once each rename a whole file of their own)."""
     path = Path(path)
-    return path.with_name(f".{path.stem}.partial{path.suffix}")
+    return path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
 
 
 @contextlib.contextmanager

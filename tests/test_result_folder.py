@@ -63,6 +63,22 @@ def test_a_write_that_fails_halfway_leaves_the_earlier_file(tmp_path):
     assert target.read_bytes() == b"the earlier version" and _no_partial_files(tmp_path) == []
 
 
+def test_two_processes_writing_one_file_at_once_each_rename_a_whole_one(tmp_path):
+    """Two runs that fill the same cache at once (two tracks started together on a new machine, a batch's
+    workers) each write under a name of their own: neither fails, and the file is one of theirs, whole."""
+    import subprocess
+    import sys
+
+    target = tmp_path / "motion.npz"
+    writer = ("import sys\nfrom markerless_mocap.core.atomic_files import atomic_path\n"
+              "for _ in range(200):\n"
+              "    with atomic_path(sys.argv[1]) as tmp:\n"
+              "        tmp.write_bytes(sys.argv[2].encode() * 20000)\n")
+    runs = [subprocess.Popen([sys.executable, "-c", writer, str(target), tag]) for tag in "ab"]
+    assert [run.wait(timeout=120) for run in runs] == [0, 0]
+    assert target.read_bytes() in (b"a" * 20000, b"b" * 20000) and _no_partial_files(tmp_path) == []
+
+
 def test_disk_full_during_a_run_keeps_the_solved_frames(tmp_path, monkeypatch):
     out = tmp_path / "out"
     writer = _writer(out)
