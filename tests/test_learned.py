@@ -267,68 +267,6 @@ def test_a_view_with_swapped_sides_does_not_pull_the_fit(walk_truth):
     assert (e[1:] > e[0]).all()
 
 
-def _sides_by_trying_every_assignment(projected, targets, swap, sigma, price):
-    """Reference for the pairs' sides: every left/right assignment of a view's pairs tried, each costing its
-    points' weighted rho plus the price for each pair in the smaller group (those against the view's sides)."""
-    pairs = [(k, int(j)) for k, j in enumerate(swap) if k < j]
-    alone = [k for k, j in enumerate(swap) if k == j]
-    out = np.zeros(len(projected))
-    for p, pose in enumerate(projected):
-        views = []
-        for c in range(len(pose)):
-            total_w = targets.weight[c].sum()
-            if total_w <= 1e-6:
-                continue
-
-            def rho(point, landmark, view=pose[c], c=c):
-                d2 = np.sum((view[point] - targets.uv[c, landmark]) ** 2) / (sigma * targets.person_px[c]) ** 2
-                return targets.weight[c, landmark] * min(d2 / (d2 + 1), 1.0)
-
-            best = np.inf
-            for bits in range(2 ** len(pairs)):
-                flips = [(bits >> i) & 1 for i in range(len(pairs))]
-                cost = sum(rho(k, k) for k in alone) + price * min(sum(flips), len(pairs) - sum(flips))
-                for (k, j), flip in zip(pairs, flips):
-                    cost += rho(k, j) + rho(j, k) if flip else rho(k, k) + rho(j, j)
-                best = min(best, cost)
-            views.append(best / total_w)
-        out[p] = np.mean(views)
-    return out
-
-
-def test_a_view_takes_its_sides_together_and_a_pair_against_them_pays(walk_truth):
-    """Each view's pairs are taken as they come or all swapped, a pair the other way for PAIR_SWAP_PRICE: the
-    NumPy reference and the numba kernel against every assignment tried (1e-12), and one view's knees swapped
-    alone cost the truth that price, where a whole view swapped costs nothing."""
-    from markerless_mocap.core.evidence.learned import CROP_MARGIN, SWAP_ORDER
-    from markerless_mocap.core.evidence.keypoints import (KEYPOINT_SIGMA, PAIR_SWAP_PRICE, KeypointTargets,
-                                                          keypoint_energy_reference)
-    from markerless_mocap.core.evidence.keypoints_fast import keypoint_energy as fast
-
-    body, poses, cameras, rig = walk_truth
-    truth = poses[20]
-    rng = np.random.default_rng(4)
-    evidence = synthetic_evidence(body, truth, cameras, rig, noise_px=3.0)
-    evidence[1].keypoints = evidence[1].keypoints[SWAP_ORDER]
-    knees = evidence[2].keypoints.copy()
-    knees[[25, 26]] = knees[[26, 25]]
-    evidence[2].keypoints = knees
-    targets = KeypointTargets.from_evidence(evidence, rig, CROP_MARGIN, alternatives=False)
-    scale = np.where(np.isin(np.arange(body.n_dof), body.translation_dofs), 0.1, np.deg2rad(20.0))
-    trial = np.vstack([truth, body.clamp(truth + rng.normal(0, 1, (12, body.n_dof)) * scale)])
-    pts = rig.world(body, trial)
-    projected = np.stack([c.project(pts.reshape(-1, 3)).reshape(pts.shape[:2] + (2,)) for c in cameras], axis=1)
-    for price in (0.0, PAIR_SWAP_PRICE, 1.0):
-        want = _sides_by_trying_every_assignment(projected, targets, rig.swap, KEYPOINT_SIGMA, price)
-        np.testing.assert_allclose(keypoint_energy_reference(projected, targets, rig.swap, pair_price=price), want,
-                                   atol=1e-12)
-        np.testing.assert_allclose(fast(projected, targets, rig.swap, KEYPOINT_SIGMA, price), want, atol=1e-12)
-    # The truth: the knees against their view's sides pay the price once (if their rho is not cheaper).
-    free = keypoint_energy_reference(projected[:1], targets, rig.swap, pair_price=0.0)[0]
-    priced = keypoint_energy_reference(projected[:1], targets, rig.swap, pair_price=PAIR_SWAP_PRICE)[0]
-    assert 0 < priced - free <= PAIR_SWAP_PRICE / targets.weight[2].sum() / len(cameras) + 1e-12
-
-
 def test_views_without_landmarks_are_left_out(walk_truth):
     body, poses, cameras, rig = walk_truth
     truth = poses[20]

@@ -55,11 +55,6 @@ VISIBILITY_FLOOR = 0.25
 # would plus this much per logit it lies below the landmark's top peak: a close runner-up is nearly as good
 # an explanation; one ALTERNATIVE_MAX_GAP (3) logits down costs 0.75 more, close to an outlier's 1.
 ALTERNATIVE_COST_PER_LOGIT = 0.25
-# What a left/right pair pays for going against its view's sides [DESIGN]: a pose that fits one pair the other way
-# round from the rest of the view costs this much more (in weighted rho, a pair costs 0-2). 0 lets every pair swap
-# on its own, which lets a leg take the other leg's landmarks in a side view where the two look alike
-# (docs/defaults.md, "PAIR_SWAP_PRICE").
-PAIR_SWAP_PRICE = 0.2
 
 
 def landmark_weights(visibility):
@@ -219,29 +214,20 @@ def _candidate_costs(projected, targets, order, sigma):
     return w[None] * np.take_along_axis(rho, best[..., None], axis=-1)[..., 0], best
 
 
-def assigned_costs(projected, targets, swap, sigma=KEYPOINT_SIGMA, pair_price=None):
+def assigned_costs(projected, targets, swap, sigma=KEYPOINT_SIGMA):
     """Per point (P,C,K): its weighted rho, whether its view's left/right pair is taken the other way round,
-    and which candidate of the landmark it matched (0: the regressed point). Single-view detectors swap
-    sides, most often all at once: each view takes its sides as they come or all swapped, whichever costs
-    less, and a pair may still go the other way for pair_price (PAIR_SWAP_PRICE) added to its two points;
-    each landmark's cheapest candidate counted."""
-    price = PAIR_SWAP_PRICE if pair_price is None else float(pair_price)
+    and which candidate of the landmark it matched (0: the regressed point). Each pair is assigned the way
+    that costs less (single-view detectors swap sides), each landmark's cheapest candidate counted."""
     K = projected.shape[2]
     rho_same, best_same = _candidate_costs(projected, targets, np.arange(K), sigma)
     rho_swap, best_swap = _candidate_costs(projected, targets, swap, sigma)
     pair_same = rho_same + rho_same[:, :, swap]  # a pair's cost under each assignment
     pair_swap = rho_swap + rho_swap[:, :, swap]
-    paired = np.asarray(swap) != np.arange(K)
-    first = paired & (np.asarray(swap) > np.arange(K))  # each pair counted once
-    as_they_come = np.where(first, np.minimum(pair_same, pair_swap + price), 0.0).sum(axis=2)
-    all_swapped = np.where(first, np.minimum(pair_swap, pair_same + price), 0.0).sum(axis=2)
-    view_swapped = (all_swapped < as_they_come)[..., None]                      # (P,C,1)
-    flip = paired & np.where(view_swapped, ~(pair_same + price < pair_swap), pair_swap + price < pair_same)
-    per_point = np.where(flip, rho_swap, rho_same) + np.where(flip != view_swapped, 0.5 * price, 0.0) * paired
-    return per_point, flip, np.where(flip, best_swap, best_same)
+    flip = pair_swap < pair_same
+    return np.where(flip, rho_swap, rho_same), flip, np.where(flip, best_swap, best_same)
 
 
-def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA, pair_price=None):
+def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA):
     """keypoint_energy_reference in numba (core/evidence/keypoints_fast.py) when numba is there."""
     global _FAST_ENERGY
     if _FAST_ENERGY is None:
@@ -250,23 +236,22 @@ def keypoint_energy(projected, targets, swap, sigma=KEYPOINT_SIGMA, pair_price=N
         except ImportError:
             fast = keypoint_energy_reference
         _FAST_ENERGY = fast
-    return _FAST_ENERGY(projected, targets, swap, sigma, pair_price)
+    return _FAST_ENERGY(projected, targets, swap, sigma)
 
 
 _FAST_ENERGY = None
 
 
-def keypoint_energy_reference(projected, targets, swap, sigma=KEYPOINT_SIGMA, pair_price=None):
+def keypoint_energy_reference(projected, targets, swap, sigma=KEYPOINT_SIGMA):
     """Projected rig points (P,C,K,2) vs landmarks -> (P,) energy, about [0, 1].
 
-    Per view: the weighted mean of rho over the points; the view's left/right pairs count as they come or all
-    swapped, whichever fits the pose better (single-view detectors swap sides; the other views and the other
-    cues decide), a pair against the view's choice for pair_price more (assigned_costs), and each landmark
-    with whichever of its candidates (the regressed point, the heatmap's second guesses at their extra cost)
-    fits better. Views without landmarks are left out; the mean is over the
+    Per view: the weighted mean of rho over the points; each left/right pair counts with whichever
+    assignment fits the pose better (single-view detectors swap sides; the other views and the other cues
+    decide), and each landmark with whichever of its candidates (the regressed point, the heatmap's second
+    guesses at their extra cost) fits better. Views without landmarks are left out; the mean is over the
     views that have some.
     """
-    per_point, _, _ = assigned_costs(projected, targets, swap, sigma, pair_price)
+    per_point, _, _ = assigned_costs(projected, targets, swap, sigma)
     w = targets.weight
     total_w = w.sum(axis=1)  # swapping permutes the weights within pairs: same total
     seen = total_w > 1e-6

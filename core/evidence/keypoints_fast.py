@@ -22,7 +22,7 @@ def _rho(px, py, uv, extra, c, m, inv_s2):
 
 
 @jit()
-def _energy_kernel(projected, uv, extra, weight, inv_s2, swap, total_w, price, out):
+def _energy_kernel(projected, uv, extra, weight, inv_s2, swap, total_w, out):
     P, C, K = projected.shape[0], projected.shape[1], projected.shape[2]
     n_seen = 0
     for c in range(C):
@@ -33,7 +33,7 @@ def _energy_kernel(projected, uv, extra, weight, inv_s2, swap, total_w, price, o
         for c in range(C):
             if total_w[c] <= 1e-6:
                 continue
-            as_they_come, all_swapped = 0.0, 0.0  # the view's sides taken as they come or all swapped
+            view = 0.0
             for k in range(K):
                 j = swap[k]
                 if j < k:
@@ -41,28 +41,23 @@ def _energy_kernel(projected, uv, extra, weight, inv_s2, swap, total_w, price, o
                 xk, yk = projected[p, c, k, 0], projected[p, c, k, 1]
                 same_k = weight[c, k] * _rho(xk, yk, uv, extra, c, k, inv_s2[c])
                 if j == k:  # no left/right partner (the nose)
-                    as_they_come += same_k
-                    all_swapped += same_k
+                    view += same_k
                     continue
                 xj, yj = projected[p, c, j, 0], projected[p, c, j, 1]
                 same = same_k + weight[c, j] * _rho(xj, yj, uv, extra, c, j, inv_s2[c])
                 swapped = (weight[c, j] * _rho(xk, yk, uv, extra, c, j, inv_s2[c])
                            + weight[c, k] * _rho(xj, yj, uv, extra, c, k, inv_s2[c]))
-                as_they_come += min(same, swapped + price)  # a pair against its view's sides pays the price
-                all_swapped += min(swapped, same + price)
-            total += min(as_they_come, all_swapped) / total_w[c]
+                view += swapped if swapped < same else same
+            total += view / total_w[c]
         out[p] = total / n_seen if n_seen else 0.0
 
 
-def keypoint_energy(projected, targets, swap, sigma, pair_price=None):
+def keypoint_energy(projected, targets, swap, sigma):
     """Same arguments and result as core.evidence.keypoints.keypoint_energy: (P,C,K,2) -> (P,)."""
-    from .keypoints import PAIR_SWAP_PRICE
-
     uv, extra = targets.candidates()
     out = np.empty(projected.shape[0])
     _energy_kernel(np.ascontiguousarray(projected, dtype=np.float64), np.ascontiguousarray(uv, dtype=np.float64),
                    np.ascontiguousarray(extra, dtype=np.float64), np.ascontiguousarray(targets.weight, np.float64),
                    (1.0 / (sigma * np.asarray(targets.person_px, np.float64))) ** 2,
-                   np.ascontiguousarray(swap, dtype=np.int64), targets.weight.sum(axis=1).astype(np.float64),
-                   PAIR_SWAP_PRICE if pair_price is None else float(pair_price), out)
+                   np.ascontiguousarray(swap, dtype=np.int64), targets.weight.sum(axis=1).astype(np.float64), out)
     return out
