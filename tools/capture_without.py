@@ -8,8 +8,10 @@ other file of the capture, except the left-out cameras' footage, background plat
 entry of videos/, background/, gt_masks/ or preview/ named after a left-out camera (cam1.mp4, cam1.png, cam1/).
 """
 import argparse
+import re
 import shutil
 import sys
+import tomllib
 from pathlib import Path
 
 from markerless_mocap.core.capture.calibration import (find_calibration_file, read_calibration,
@@ -34,8 +36,28 @@ def capture_without(capture, out, drop):
     calibration_files = {calibration.name, "intri.yml", "extri.yml"}
     shutil.copytree(capture, out, ignore=lambda folder, names: _left_out(Path(folder), names, capture, drop,
                                                                          calibration_files))
-    write_toml_calibration(kept, out / "calibration.toml")
+    _write_calibration(calibration, kept, drop, out / "calibration.toml")
     return [cam.name for cam in kept]
+
+
+def _write_calibration(source, kept, drop, path):
+    """A TOML calibration loses the left-out cameras' tables and nothing else (its numbers as written, so a take
+    tracked from it is the take from the original's cameras); any other format, or tables this cannot tell
+    apart, is written anew from the cameras read."""
+    if source.suffix == ".toml":
+        blocks = re.split(r"(?m)^(?=\[)", source.read_text(encoding="utf-8"))
+        path.write_text("".join(b for b in blocks if not _camera_named(b, drop)), encoding="utf-8")
+        if [cam.name for cam in read_calibration(path)] == [cam.name for cam in kept]:
+            return
+    write_toml_calibration(kept, path)
+
+
+def _camera_named(block, drop):
+    try:
+        tables = tomllib.loads(block)
+    except tomllib.TOMLDecodeError:
+        return False
+    return any(isinstance(t, dict) and "matrix" in t and str(t.get("name", key)) in drop for key, t in tables.items())
 
 
 def _left_out(folder, names, capture, drop, calibration_files):
