@@ -14,7 +14,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from markerless_mocap.core.capture.calibration import (find_calibration_file, read_calibration,
+from markerless_mocap.core.capture.calibration import (_camera_tables, find_calibration_file, read_calibration,
                                                        require_two_cameras, write_toml_calibration)
 
 PER_CAMERA_FOLDERS = ("videos", "background", "gt_masks", "preview")
@@ -53,11 +53,12 @@ def _write_calibration(source, kept, drop, path):
 
 
 def _camera_named(block, drop):
+    """Whether a TOML block holds a left-out camera's table, found and named as the calibration reader does."""
     try:
-        tables = tomllib.loads(block)
+        doc = tomllib.loads(block)
     except tomllib.TOMLDecodeError:
         return False
-    return any(isinstance(t, dict) and "matrix" in t and str(t.get("name", key)) in drop for key, t in tables.items())
+    return any(str(table.get("name", key)) in drop for key, table in _camera_tables(doc))
 
 
 def _left_out(folder, names, capture, drop, calibration_files):
