@@ -28,6 +28,7 @@ from .first_frame_review import FirstFrameEvidence, reviewed
 from .limb_recovery import LimbRecovery
 from .local_fit import LocalFit
 from .observation import FrameObserver, background_models, expected_poses, guide_after_search, guide_before_search
+from .pulling_view import only_views, pulling_view, view_gains
 from .root_gate import RootGate
 from .settings import FrameEstimate, TrackingSettings
 from .turned_round import TurnedRound
@@ -86,7 +87,8 @@ class Tracker:
                                           self._particles_follow)
         fps = getattr(capture.frames, "fps", None) or DEFAULT_FPS
         self.root_gate = RootGate(self.space, body.translation_dofs, body.root_rotation_dofs, fps, s.seed,
-                                  self.fit_locally if self.refines else None, self._particles_follow)
+                                  self.fit_locally if self.refines else None, self._particles_follow,
+                                  self._leave_out_pulling_view)
         self.observation = None  # the frame loaded last (observation.Observation)
         self.views_in_play = None  # per camera, whether the image terms listen to it this frame
         self.views_left_out = {}  # {frame: [camera names]} left out of the image terms that frame
@@ -301,7 +303,7 @@ class Tracker:
             self.energy.init_color_model(pose)
         energy = float(self.energy(pose[None])[0])
         self.optimizer.start(self.to_relative(pose))
-        self.root_gate.start(frame)
+        self.root_gate.start(frame, pose[self.body.translation_dofs])
         return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
 
     def track(self, frame, next_frame=NEXT):
@@ -360,6 +362,20 @@ class Tracker:
         self._particles_follow(candidate - estimate)
         self.history = [candidate] * len(self.history)  # the half turn is no motion to predict from
         return candidate, candidate_energy, evaluations
+
+    def _leave_out_pulling_view(self, refused, predicted):
+        """The root gate refused `refused`: the view that favours it most over `predicted` leaves this frame's image
+        terms and landmarks (pulling_view.py). Returns the camera names left out."""
+        energy = self.energy
+        view = pulling_view(view_gains(energy, self._energy_fn, self.views_in_play, refused, predicted))
+        if view is None:
+            return []
+        self.views_in_play = self.views_in_play.copy()
+        self.views_in_play[view] = False
+        energy.set_view_weights(self.views_in_play.astype(np.float64))
+        if energy.keypoints is not None:
+            energy.keypoints = only_views(energy.keypoints, self.views_in_play)
+        return [self.capture.cameras[view].name]  # report.json's root_gate entry of the frame names it
 
     def _review_first_frame(self):
         """Once the second frame is solved: its pose fitted locally to the first frame's images replaces the first
