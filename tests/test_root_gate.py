@@ -151,10 +151,32 @@ def test_a_reset_history_does_not_hide_a_step():
         found = g.check(swerved.copy(), 0.0, 0, 4, [swerved, swerved], flat)[0]
         assert [x["frame"] for x in g.gated] == [4] and g.gated[0]["off_prediction_m"] == pytest.approx(0.25, abs=1e-3)
         assert np.linalg.norm(found[T] - (2 * history[-1] - history[-2])[T]) <= root_swerve_limit(1, 1, FPS) + 1e-9
-    assert gate.state()["before"][0] == 3 and gate.state()["last_frame"] == 4
+    assert gate.state()["last_frame"] == 4
+    np.testing.assert_allclose(gate.state()["velocity"][0], (history[-1] - history[-2])[T])  # kept from before
     old = RootGate(space, T, R, FPS)
     old.restore({"last_frame": 3, "first_step": False})  # a checkpoint from before the roots were kept
     assert old.check(swerved, 0.0, 0, 4, history, flat)[0] is swerved and old.gated == []
+
+
+def test_coming_back_to_the_long_track_passes():
+    """Walking at 1 m/s for a second, the model is pulled 0.3 m sideways over three frames (each within the swerve
+    bound, as a slow switch is), then jumps back onto the walk: a swerve of 0.3 m, but back towards where the
+    walk of a third of a second ago leads, so it passes; jumping 0.3 m further away is refused."""
+    space = make_space()
+
+    def flat(X):
+        return np.zeros(len(X))
+
+    for back, refused in ((True, []), (False, [34])):
+        gate, history = steady_gate(space, 1.0, 31)
+        for frame in (31, 32, 33):
+            nxt = history[-1] + np.r_[1.0 / FPS, 0.1, np.zeros(D - 2)]
+            assert gate.check(nxt, 0.0, 0, frame, history, flat)[0] is nxt
+            history = [history[-1], nxt]
+        step = history[-1].copy()
+        step[T] += [1.0 / FPS, -0.3 if back else 0.3, 0.0]
+        gate.check(step, 0.0, 0, 34, history, flat)
+        assert [g["frame"] for g in gate.gated] == refused
 
 
 def test_hold_root_moves_only_roots_beyond_the_ball():
@@ -295,5 +317,5 @@ def test_the_tracker_refuses_a_jump_of_its_search(monkeypatch):
     assert hips_error < 0.06, f"hips {hips_error:.3f} m from the truth after the re-search"
     assert [g["frame"] for g in tracker.gated] == [1] and tracker.gated[0]["speed_m_per_s"] > 40
     gate_state = tracker.state()["root_gate"]
-    assert gate_state["last_frame"] == 1 and not gate_state["first_step"] and gate_state["before"] is None
+    assert gate_state["last_frame"] == 1 and not gate_state["first_step"] and gate_state["velocity"] is None
     np.testing.assert_allclose(gate_state["last_root"], est.pose[body.translation_dofs])

@@ -24,6 +24,9 @@ MAX_ROOT_ACCELERATION = 50.0  # m/s^2
 # The estimate's own swerve: a frame that recovers from a bad one moves its root back by the error it had, 0.11 m
 # after a frame 93 mm off on a three-camera crossing, which a gate must not refuse (docs/measurements.md).
 SWERVE_SCATTER = 0.1  # metres
+# A swerve back towards where the root went this long ago, carried on at its pace then, is the model coming back to
+# its person after losing it, not leaving: it passes (docs/measurements.md).
+LONG_TRACK_SECONDS = 1.0 / 3.0
 # The first frame's estimate may still be as far off as the subject's placement may be (the architecture's 20 cm),
 # and the first tracked frame corrects it: that step alone may be this much longer.
 FIRST_STEP_SLACK = 0.2  # metres
@@ -86,11 +89,11 @@ class RootGate:
         root_step_limit(1, self.fps, self.speed, self.jitter)  # a bad frame rate fails here, not mid-take
         self.last_frame = None  # the frame solved last (carried in the checkpoint)
         self.first_step = False  # the next frame is the first after the initial one
-        # The roots (absolute translations) of the frames solved last and before it, kept here rather than read from
-        # the tracker's history, which a turned-round body resets to its new pose. `before` is None while the
-        # velocity between the two is none to predict from: the initial frame's placement, which the first step
-        # corrects, or a checkpoint written before it was kept.
-        self.last_root, self.before = None, None  # (3,), (frame, (3,))
+        # The root (absolute translation) of the frame solved last, kept here rather than read from the tracker's
+        # history, which a turned-round body resets to its new pose; the velocity to predict from (per frame, and
+        # over how many frames it was measured), None after the initial frame, whose placement the first step
+        # corrects; the roots of the last LONG_TRACK_SECONDS, (frame, root) each.
+        self.last_root, self.velocity, self.track = None, None, []
         # per refused solution: {"frame", "speed_m_per_s", "kept_speed_m_per_s", "limit_m_per_s"} (too fast) or
         # {"frame", "off_prediction_m", "kept_off_prediction_m", "limit_m"} (swerved from its prediction)
         self.gated = []
@@ -106,33 +109,53 @@ class RootGate:
         self.last_frame = int(frame)
         self.first_step = True
         self.last_root = None if root is None else np.asarray(root, dtype=np.float64).copy()
-        self.before = None
+        self.velocity = None
+        self.track = [] if root is None else [(int(frame), self.last_root)]
 
     def state(self):
         """What a checkpoint keeps (plain data)."""
         return {"last_frame": self.last_frame, "first_step": self.first_step,
                 "last_root": None if self.last_root is None else self.last_root.tolist(),
-                "before": None if self.before is None else [self.before[0], self.before[1].tolist()]}
+                "velocity": None if self.velocity is None else [self.velocity[0].tolist(), self.velocity[1]],
+                "track": [[f, r.tolist()] for f, r in self.track]}
 
     def restore(self, state):
         """Continue from state() (None: from a checkpoint written before the gate; the next frame is not gated).
         A checkpoint from before the bound on the change of velocity holds the next frame to the speed bound only."""
         state = state or {}
-        last, root, before = state.get("last_frame"), state.get("last_root"), state.get("before")
+        last, root, velocity = state.get("last_frame"), state.get("last_root"), state.get("velocity")
         self.last_frame = None if last is None else int(last)
         self.first_step = bool(state.get("first_step", False))
         self.last_root = None if root is None else np.asarray(root, dtype=np.float64)
-        self.before = None if before is None else (int(before[0]), np.asarray(before[1], dtype=np.float64))
+        self.velocity = None if velocity is None else (np.asarray(velocity[0], dtype=np.float64), int(velocity[1]))
+        self.track = [(int(f), np.asarray(r, dtype=np.float64)) for f, r in state.get("track", [])]
 
     def prediction(self, frame):
-        """Where the root's velocity over the last two solved frames carries it at `frame`, and how far from there
-        it may land: (root (3,), limit) or None without a velocity to predict from."""
-        if self.before is None or self.last_root is None:
+        """Where the root's velocity carries it at `frame`, and how far from there it may land: (root (3,), limit)
+        or None without a velocity to predict from."""
+        if self.velocity is None or self.last_root is None:
             return None
-        apart, apart_before = int(frame) - self.last_frame, self.last_frame - self.before[0]
-        velocity = (self.last_root - self.before[1]) / max(abs(apart_before), 1)
-        limit = root_swerve_limit(apart, apart_before, self.fps, self.acceleration, self.scatter)
-        return self.last_root + velocity * max(abs(apart), 1), limit
+        apart = max(abs(int(frame) - self.last_frame), 1)
+        limit = root_swerve_limit(apart, self.velocity[1], self.fps, self.acceleration, self.scatter)
+        return self.last_root + self.velocity[0] * apart, limit
+
+    def long_prediction(self, frame):
+        """Where the root's pace of LONG_TRACK_SECONDS ago carries it at `frame` (None while the track is shorter)."""
+        if len(self.track) < 3 or self.track[-1][0] - self.track[0][0] < LONG_TRACK_SECONDS * self.fps - 0.5:
+            return None
+        (f_old, r_old), (f_mid, r_mid) = self.track[0], self.track[len(self.track) // 2]
+        return r_old + (r_mid - r_old) * (int(frame) - f_old) / max(f_mid - f_old, 1)
+
+    def swerves(self, root, frame):
+        """(prediction, limit) when `root` at `frame` swerved from its prediction beyond the limit and not back
+        towards the long track; else None."""
+        swerve = self.prediction(frame)
+        if swerve is None or np.linalg.norm(root - swerve[0]) <= swerve[1]:
+            return None
+        along = self.long_prediction(frame)
+        if along is not None and np.linalg.norm(root - along) < np.linalg.norm(swerve[0] - along):
+            return None
+        return swerve
 
     def check(self, estimate, energy, evaluations, frame, history, energy_fn):
         """`estimate` (relative) of `frame`, after its search, local fit, turn and limb recovery; `history`: the
@@ -147,11 +170,11 @@ class RootGate:
             np.asarray(history[-1], dtype=np.float64)[self.translation_dofs]
         root = np.asarray(estimate, dtype=np.float64)[self.translation_dofs]
         step = float(np.linalg.norm(root - last_root))
-        swerve = self.prediction(frame)
+        swerve = self.swerves(root, frame) if step <= limit else None
         found = None
         if step > limit:
             centre, bound, predicted_root = last_root, limit, None
-        elif swerve is not None and np.linalg.norm(root - swerve[0]) > swerve[1]:
+        elif swerve is not None:
             centre, bound = swerve
             predicted_root = centre
         else:
@@ -169,12 +192,14 @@ class RootGate:
                 entry = {"off_prediction_m": round(float(np.linalg.norm(root - centre)), 4),
                          "kept_off_prediction_m": round(kept, 4), "limit_m": round(float(bound), 4)}
             self.gated.append({"frame": int(frame), **entry, **({"views_left_out": left_out} if left_out else {})})
-        self.before = None if self.first_step else (self.last_frame, last_root)
-        self.last_frame, self.first_step = int(frame), False
+        if found is None:  # a refused frame's kept root is on a bound: no pace to predict from, the last one stays
+            self.velocity = None if self.first_step else ((root - last_root) / apart, apart)
+        kept_root = root if found is None else found[self.translation_dofs].copy()
+        self.last_frame, self.first_step, self.last_root = int(frame), False, kept_root
+        window = int(round(LONG_TRACK_SECONDS * self.fps))
+        self.track = [(f, r) for f, r in self.track if f >= int(frame) - window] + [(int(frame), kept_root)]
         if found is None:
-            self.last_root = root
             return estimate, energy, evaluations
-        self.last_root = found[self.translation_dofs].copy()
         if self.follow is not None:
             self.follow(found - np.asarray(estimate, dtype=np.float64))
         return found, found_energy, evaluations + used
