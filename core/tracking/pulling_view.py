@@ -2,8 +2,8 @@
 the images drew the model off its person, most often another person crossing in front of it in one view. Each view
 in play is scored alone (its image terms and its landmarks) on the refused estimate and on the prediction; the
 view that favours the refused estimate most is left out of that frame's re-search, so the evidence that cannot be
-split there counts less instead of pulling the model across. Figures: docs/measurements.md, "Other people in the
-room"."""
+split there counts less instead of pulling the model across.
+Figures: docs/measurements.md, "Other people in the room"."""
 import dataclasses
 
 import numpy as np
