@@ -318,4 +318,5 @@ def test_the_tracker_refuses_a_jump_of_its_search(monkeypatch):
     assert [g["frame"] for g in tracker.gated] == [1] and tracker.gated[0]["speed_m_per_s"] > 40
     gate_state = tracker.state()["root_gate"]
     assert gate_state["last_frame"] == 1 and not gate_state["first_step"] and gate_state["velocity"] is None
-    np.testing.assert_allclose(gate_state["last_root"], est.pose[body.translation_dofs])
+    assert gate_state["track"][-1][0] == 1
+    np.testing.assert_allclose(gate_state["track"][-1][1], est.pose[body.translation_dofs])

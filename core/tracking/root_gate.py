@@ -89,11 +89,12 @@ class RootGate:
         root_step_limit(1, self.fps, self.speed, self.jitter)  # a bad frame rate fails here, not mid-take
         self.last_frame = None  # the frame solved last (carried in the checkpoint)
         self.first_step = False  # the next frame is the first after the initial one
-        # The root (absolute translation) of the frame solved last, kept here rather than read from the tracker's
-        # history, which a turned-round body resets to its new pose; the velocity to predict from (per frame, and
-        # over how many frames it was measured), None after the initial frame, whose placement the first step
-        # corrects; the roots of the last LONG_TRACK_SECONDS, (frame, root) each.
-        self.last_root, self.velocity, self.track = None, None, []
+        # The roots (absolute translations) of the last LONG_TRACK_SECONDS, (frame, root) each, the frame solved
+        # last at the end: kept here rather than read from the tracker's history, which a turned-round body resets
+        # to its new pose. The velocity to predict from (per frame, and over how many frames it was measured), None
+        # after the initial frame, whose placement the first step corrects.
+        self.track, self.velocity = [], None
+        self.track_frames = int(round(LONG_TRACK_SECONDS * self.fps))
         # per refused solution: {"frame", "speed_m_per_s", "kept_speed_m_per_s", "limit_m_per_s"} (too fast) or
         # {"frame", "off_prediction_m", "kept_off_prediction_m", "limit_m"} (swerved from its prediction)
         self.gated = []
@@ -108,14 +109,17 @@ class RootGate:
         """The first frame is solved (its root translation `root`): later ones are measured from it."""
         self.last_frame = int(frame)
         self.first_step = True
-        self.last_root = None if root is None else np.asarray(root, dtype=np.float64).copy()
         self.velocity = None
-        self.track = [] if root is None else [(int(frame), self.last_root)]
+        self.track = [] if root is None else [(int(frame), np.asarray(root, dtype=np.float64).copy())]
+
+    @property
+    def last_root(self):
+        """The root of the frame solved last, or None when it is not known (a checkpoint from before it was kept)."""
+        return self.track[-1][1] if self.track else None
 
     def state(self):
         """What a checkpoint keeps (plain data)."""
         return {"last_frame": self.last_frame, "first_step": self.first_step,
-                "last_root": None if self.last_root is None else self.last_root.tolist(),
                 "velocity": None if self.velocity is None else [self.velocity[0].tolist(), self.velocity[1]],
                 "track": [[f, r.tolist()] for f, r in self.track]}
 
@@ -123,10 +127,9 @@ class RootGate:
         """Continue from state() (None: from a checkpoint written before the gate; the next frame is not gated).
         A checkpoint from before the bound on the change of velocity holds the next frame to the speed bound only."""
         state = state or {}
-        last, root, velocity = state.get("last_frame"), state.get("last_root"), state.get("velocity")
+        last, velocity = state.get("last_frame"), state.get("velocity")
         self.last_frame = None if last is None else int(last)
         self.first_step = bool(state.get("first_step", False))
-        self.last_root = None if root is None else np.asarray(root, dtype=np.float64)
         self.velocity = None if velocity is None else (np.asarray(velocity[0], dtype=np.float64), int(velocity[1]))
         self.track = [(int(f), np.asarray(r, dtype=np.float64)) for f, r in state.get("track", [])]
 
@@ -141,7 +144,7 @@ class RootGate:
 
     def long_prediction(self, frame):
         """Where the root's pace of LONG_TRACK_SECONDS ago carries it at `frame` (None while the track is shorter)."""
-        if len(self.track) < 3 or self.track[-1][0] - self.track[0][0] < LONG_TRACK_SECONDS * self.fps - 0.5:
+        if len(self.track) < 3 or self.track[-1][0] - self.track[0][0] < self.track_frames:
             return None
         (f_old, r_old), (f_mid, r_mid) = self.track[0], self.track[len(self.track) // 2]
         return r_old + (r_mid - r_old) * (int(frame) - f_old) / max(f_mid - f_old, 1)
@@ -195,9 +198,8 @@ class RootGate:
         if found is None:  # a refused frame's kept root is on a bound: no pace to predict from, the last one stays
             self.velocity = None if self.first_step else ((root - last_root) / apart, apart)
         kept_root = root if found is None else found[self.translation_dofs].copy()
-        self.last_frame, self.first_step, self.last_root = int(frame), False, kept_root
-        window = int(round(LONG_TRACK_SECONDS * self.fps))
-        self.track = [(f, r) for f, r in self.track if f >= int(frame) - window] + [(int(frame), kept_root)]
+        self.last_frame, self.first_step = int(frame), False
+        self.track = [(f, r) for f, r in self.track if f >= int(frame) - self.track_frames] + [(int(frame), kept_root)]
         if found is None:
             return estimate, energy, evaluations
         if self.follow is not None:
