@@ -379,6 +379,25 @@ SCENES["duet"] = dict(
                  turn=(28, 18, 120), proportions=SCENES["actor3"]["proportions"], proportions_from="actor3",
                  colours={"shirt": (0.045, 0.12, 0.05), "trousers": (0.14, 0.11, 0.07), "hair": (0.1, 0.06, 0.03)}),
     handshake=dict(first_frame=45, frames_in=6, above_hips_m=0.18))
+# issue 42's DEVELOPMENT scene for telling actors apart by their looks, rendered on 2026-12-06: meant to be tuned on
+# (the held-out duet judges what is tuned here). The duet's idea with everything else other: the Lead walks
+# crossing_dev's window of 01_01 (turning round in a few steps, standing, crouching) with actor4's build, the
+# Partner walks 131_01 from source frame 150 with actor5's build, bent the other way so that it passes behind the
+# Lead's back; no handshake. Clothes of different colours (a mustard shirt and a blue one); own seed and cameras.
+SCENES["duet_dev"] = dict(
+    bvh="01_01.bvh", start=490, n_frames=60, seed=4949, uncontrolled=False, calibration="toml",
+    cameras_from_facing=True,
+    cameras=[
+        (200, 3.7, 1.60, 540, (4.0, -3.0), -0.8),
+        (145, 3.6, 1.75, 545, (-5.0, 2.5), 1.0),
+        (20, 3.8, 1.45, 525, (3.5, 5.0), -0.4),
+        (315, 3.5, 1.65, 535, (-6.0, -4.0), 0.6)],
+    colours={"shirt": (0.25, 0.17, 0.03), "trousers": (0.035, 0.035, 0.04)},
+    proportions=SCENES["actor4"]["proportions"], proportions_from="actor4", armature="Lead",
+    partner=dict(name="Partner", bvh="131_01.bvh", start=144, stop=(-60, 0.9), facing_offset_deg=0,
+                 turn=(26, 18, -110), proportions=SCENES["actor5"]["proportions"], proportions_from="actor5",
+                 colours={"shirt": (0.03, 0.06, 0.2), "trousers": (0.1, 0.1, 0.1), "hair": (0.05, 0.04, 0.03)}),
+    handshake=dict(first_frame=60, frames_in=6, above_hips_m=0.18))
 # issue 44 (a shoot day on a cluster): a long uncontrolled take for chunked `batch` tracking and its wall time.
 # 01_01 is the only clip long enough (688 frames at 30 fps): source frames 40-639 jump forward 3.3 m, turn round,
 # jump back, turn round again and jump on; arm gestures keyed on top every 60-70 frames. Playground's kind of room

@@ -16,7 +16,7 @@ from markerless_mocap.core.capture.calibration import read_calibration
 
 SCENES_ROOT = Path(os.environ.get("MOCAP_SAMPLE_SCENES", Path(__file__).resolve().parents[1] / "sample_scenes"))
 SCENES = ["walk", "playground", "busy", "dusk", "lobby", "actor", *(f"actor{n}" for n in range(2, 13)), "crossing",
-          "crossing_alone", "duet", "crossing_dev", "crossing_dev_alone", "dance", "sit", "long"]
+          "crossing_alone", "duet", "crossing_dev", "crossing_dev_alone", "duet_dev", "dance", "sit", "long"]
 
 
 def scene_dir(name):
@@ -662,6 +662,27 @@ def test_duet_actors_hide_each_other_in_two_views_each_then_shake_hands():
     assert np.all((meet[:, 2] > 0.9) & (meet[:, 2] < 1.3))
     midway = (P[held, i["Hips"], :2] + P2[held, i["Hips"], :2]) / 2
     assert np.linalg.norm(meet[:, :2] - midway, axis=1).max() < 0.15
+
+
+# ---- duet_dev: the DEVELOPMENT scene of two actors dressed apart (tuned on; the held-out duet judges) -----------
+def test_duet_dev_is_two_actors_dressed_apart_on_other_material_than_the_held_out_duet():
+    """Other clip windows, builds, seed, cameras and clothes than the duet; shirts of clearly different colours; the
+    Partner passes in front of the Lead in one view and behind it in another, never at the first frame."""
+    dev, held = (json.loads((scene_dir(n) / "scene_info.json").read_text()) for n in ("duet_dev", "duet"))
+    first, last = dev["first_source_frame_30fps"], dev["first_source_frame_30fps"] + dev["n_frames"] - 1
+    assert last < held["first_source_frame_30fps"] or first > held["first_source_frame_30fps"] + held["n_frames"] - 1
+    assert dev["partner"]["source"] != held["partner"]["source"]
+    for who in ("Lead", "Partner"):
+        assert dev["actors"][who]["proportions_from"] != held["actors"][who]["proportions_from"]
+        assert dev["actors"][who]["clothing_colours_linear_rgb"] != held["actors"][who]["clothing_colours_linear_rgb"]
+    shirts = [dev["actors"][w]["clothing_colours_linear_rgb"]["shirt"] for w in ("Lead", "Partner")]
+    assert np.abs(np.subtract(*shirts)).max() > 0.15
+    dev_cams, held_cams = (read_calibration(scene_dir(n)) for n in ("duet_dev", "duet"))
+    assert all(np.linalg.norm(a.center - b.center) > 0.5 for a, b in zip(dev_cams, held_cams))
+    for key in ("Lead_hidden_by_Partner", "Partner_hidden_by_Lead"):
+        hidden = dev["hidden"][key]
+        assert max(v["frames_hidden_over_20_percent"] for v in hidden.values()) >= 10, key
+        assert all(v["hidden_fraction"][0] < 0.05 for v in hidden.values()), key
 
 
 # ---- pose2sim_demo: a real capture (no ground truth) ------------------------------------------------
