@@ -194,6 +194,8 @@ class TrackSession:
             self.writer.info["views_shared"] = {str(f): names for f, names in self.tracker.views_shared.items()}
         if self.tracker.landmarks_set_aside:  # landmarks the other views disagreed with (another person's)
             self.writer.info["landmarks_set_aside"] = {str(f): n for f, n in self.tracker.landmarks_set_aside.items()}
+        if self.tracker.unlike_clothes:  # views whose landmarks outlined clothes unlike the actor's
+            self.writer.info["unlike_clothes"] = {str(f): v for f, v in self.tracker.unlike_clothes.items()}
         if self.tracker.views_left_out:  # the person outside a view's picture, or no person found there
             self.writer.info["views_left_out"] = {str(f): names for f, names in self.tracker.views_left_out.items()}
         self.writer.add(est, self.tracker.state())

@@ -9,7 +9,7 @@ and `stitch` and `batch` can print the same end-of-take lines as `track`.
 from __future__ import annotations
 
 # report.json keys holding {frame (str): value}
-FRAME_MAPS = ("views_shared", "landmarks_set_aside", "views_left_out", "turned_round")
+FRAME_MAPS = ("views_shared", "landmarks_set_aside", "unlike_clothes", "views_left_out", "turned_round")
 # report.json keys holding [{"frame": int, ...}]
 FRAME_LISTS = ("limb_recoveries", "root_gate")
 

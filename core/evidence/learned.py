@@ -159,6 +159,7 @@ class ViewEvidence:
     alternatives  (33, ALTERNATIVES, 3): second guesses per landmark from the heatmaps, (u, v) image pixels
                   and the gap in logits below the landmark's top peak; NaN rows where there is none.
                   None: not computed.
+    clothes       the signature of the clothes the landmarks outline (core/evidence/appearance.py), or None
     """
 
     def __init__(self, mask_prob, keypoints, visibility, presence, box, alternatives=None, crop_prob=None,
@@ -174,6 +175,7 @@ class ViewEvidence:
         self.presence = presence
         self.box = box
         self.alternatives = alternatives
+        self.clothes = None  # the clothes under the landmarks (appearance.clothes_signature), once looked at
 
     @property
     def mask_prob(self):

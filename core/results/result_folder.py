@@ -218,7 +218,7 @@ class ResultWriter:
         if not path.exists():
             return None, None
         estimates, state, settings = (checkpoint.read_legacy if legacy else checkpoint.read)(path)
-        if checkpoint.plain_settings(settings) != checkpoint.plain_settings(self.settings.to_dict()):
+        if not checkpoint.same_settings(settings, self.settings.to_dict()):
             raise checkpoint.CheckpointError(
                 f"{path}: the earlier run used different settings ({settings}); resume with the same options or "
                 "choose another --out")

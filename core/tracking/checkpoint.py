@@ -116,9 +116,24 @@ def _estimates(arrays):
     return out
 
 
+# Settings added after checkpoints were first written: one written before holds none of them, and resumes with this
+# release's value (the tracker's state for it is rebuilt from the next frames; Tracker.restore).
+ADDED_SETTINGS = ("check_clothes",)
+
+
 def plain_settings(settings_dict):
     """Settings as they read back from JSON (tuples become lists), so the two sides of a comparison agree."""
     return json.loads(json.dumps(settings_dict))
+
+
+def same_settings(saved, current):
+    """Whether a checkpoint's settings (`saved`) are the run's (`current`, both dicts), a setting added since the
+    checkpoint was written (ADDED_SETTINGS) taken as the run's."""
+    saved, current = plain_settings(saved), plain_settings(current)
+    for name in ADDED_SETTINGS:
+        if name not in saved and name in current:
+            saved[name] = current[name]
+    return saved == current
 
 
 def write(fh, estimates, state, settings_dict):

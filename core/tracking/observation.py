@@ -12,6 +12,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..evidence import BackgroundModel, compute_view_features
+from ..evidence.appearance import OUTLINE_VISIBILITY, clothes_signature
 from ..evidence.mask_cleanup import check_mask
 from ..evidence.view_features import feature_size, resize_mask
 
@@ -122,8 +123,9 @@ class FrameObserver:
     """Observes frames for the energy. It reads nothing of the tracker's state, only the capture, the background
     models and the landmark model, so the next frame can be observed in its worker thread (prefetch / take)."""
 
-    def __init__(self, capture, body, backgrounds, scales, learned_evidence, learned_mask, diffuse):
+    def __init__(self, capture, body, backgrounds, scales, learned_evidence, learned_mask, diffuse, clothes=False):
         self.capture, self.body, self.backgrounds = capture, body, backgrounds
+        self.clothes = clothes  # the signature of the clothes under each view's landmarks (clothes_check.py)
         self.scales = list(scales)  # the energy's resolution, then the local fit's if it is finer
         self.learned_evidence = learned_evidence  # run the landmark model
         self.learned_mask = learned_mask  # its person mask is the silhouette (else background subtraction)
@@ -161,8 +163,13 @@ class FrameObserver:
             self.landmark_model = LandmarkModel()
         cams = self.capture.cameras
         frames = [images[cam.name] for cam in cams]
-        return evidence_around(self.landmark_model, self.body, cams, frames, guide_poses,
-                               foreground=lambda i: self.backgrounds[cams[i].name].silhouette(frames[i]))
+        evidence = evidence_around(self.landmark_model, self.body, cams, frames, guide_poses,
+                                   foreground=lambda i: self.backgrounds[cams[i].name].silhouette(frames[i]))
+        if self.clothes:  # here, in the worker, while the main thread solves the frame before
+            for ev, image in zip(evidence, frames):
+                if ev.found:
+                    ev.clothes = clothes_signature(image, ev.keypoints, ev.visibility >= OUTLINE_VISIBILITY)
+        return evidence
 
     # ---- the worker
     def prefetch(self, frame, guide):

@@ -60,6 +60,9 @@ class TrackingSettings:
     # Observe frame t+1 (read, learned evidence, features) in a worker thread during frame t's local fit;
     # the same result either way.
     prefetch: bool = True
+    # Set aside a view's landmarks where they outline someone dressed unlike the actor of the first frames
+    # (core/tracking/clothes_check.py; docs/defaults.md, "MIN_LIKENESS").
+    check_clothes: bool = True
     # Place (and observe) frame t+1's crops before frame t's search rather than after it: a short search leaves
     # the worker too little time after it (docs/defaults.md, "observe_early").
     observe_early: bool = False

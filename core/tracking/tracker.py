@@ -22,6 +22,7 @@ from ..evidence.view_presence import views_in_play
 from ..optimizers import PoseSpace, make_optimizer
 from .anchor import RootAnchor
 from .checkpoint import optimizer_state, restore_optimizer
+from .clothes_check import ClothesCheck
 from .first_frame import (KEYPOINT_INIT_TRANSLATION, KEYPOINT_INIT_YAW, keypoint_start, neutral_joints,
                           search_first_frame)
 from .first_frame_review import FirstFrameEvidence, reviewed
@@ -79,7 +80,9 @@ class Tracker:
         self.root = RootAnchor(body.root_rotation_dofs)
         scales = [self.scale] + ([self.refine_scale] if self.refines and self.refine_scale != self.scale else [])
         self.observer = FrameObserver(capture, body, self.backgrounds, scales, weights.needs_learned_evidence,
-                                      weights.mask == "learned", diffuse=self.uses_color)
+                                      weights.mask == "learned", diffuse=self.uses_color,
+                                      clothes=s.check_clothes and weights.needs_learned_evidence)
+        self.clothes = ClothesCheck() if self.observer.clothes else None
         self.local_fit = LocalFit(body, self.proxy, capture.cameras, self.energy, self.space, self.root, self.scale,
                                   self.refine_scale, s.refine_iterations)
         self.limb_recovery = LimbRecovery(body, capture.cameras, self.energy, self.space, self.root, s.seed,
@@ -101,6 +104,7 @@ class Tracker:
         self.others = None  # the other tracked actors this frame (other_actors.OtherActors), or None
         self.views_shared = {}  # {frame: [camera names]} whose evidence was another actor's
         self.landmarks_set_aside = {}  # {frame: {camera name: landmarks}} the other views disagreed with
+        self.unlike_clothes = {}  # {frame: {camera name: likeness}} whose landmarks outlined other clothes
         self.first_evidence = None  # the searched first frame's evidence until the second frame reviews it
         self.first_frame_review = None  # what the review changed (first_frame_review.reviewed), or None
 
@@ -188,9 +192,10 @@ class Tracker:
         self.energy.set_frame(feats, self.evidence)
         apart = self._set_apart_others(guide_poses)
         aside, taken = self._set_aside_disagreeing(guide_poses)
+        unlike = self._set_aside_unlike(frame)
         names = [c.name for c in self.capture.cameras]
         # this frame's last observation decides (the first frame is observed twice: rough placement, then fitted)
-        _record(self.views_shared, frame, [n for n, s in zip(names, apart | taken) if s])
+        _record(self.views_shared, frame, [n for n, s in zip(names, apart | taken | unlike) if s])
         _record(self.landmarks_set_aside, frame, {n: int(k) for n, k in zip(names, aside) if k})
         predicted = self.body.joint_positions(np.atleast_2d(guide_poses))[-1]
         targets = self.energy.targets
@@ -239,6 +244,25 @@ class Tracker:
         energy.keypoints, aside, taken = set_aside_disagreeing(
             self.capture.cameras, energy.keypoints, energy.rig_points.swap, predicted)
         return aside.sum(axis=1), taken
+
+    def _set_aside_unlike(self, frame):
+        """Drop every landmark of the views whose landmarks outline someone dressed unlike the actor
+        (clothes_check.py). Returns (C,) bool those views."""
+        energy, n = self.energy, len(self.capture.cameras)
+        if self.clothes is None or not self.clothes.ready or energy.keypoints is None or self.evidence is None:
+            return np.zeros(n, dtype=bool)
+        unlike, like = self.clothes.unlike(self.evidence)
+        unlike &= energy.keypoints.weight.sum(axis=1) > 0
+        if unlike.any():
+            energy.keypoints = only_views(energy.keypoints, ~unlike)
+        names = [c.name for c in self.capture.cameras]
+        _record(self.unlike_clothes, frame, {m: round(float(v), 3) for m, v, u in zip(names, like, unlike) if u})
+        return unlike
+
+    def _learn_clothes(self):
+        """The actor's clothes from the views whose landmarks the frame just solved kept."""
+        if self.clothes is not None and self.energy.keypoints is not None:
+            self.clothes.learn(self.evidence, self.energy.keypoints.weight.sum(axis=1) > 0)
 
     def _plan_next(self, frame, guide, observe):
         """Place the next frame's crops around `guide` (absolute poses), and observe that frame in the worker
@@ -304,6 +328,7 @@ class Tracker:
         energy = float(self.energy(pose[None])[0])
         self.optimizer.start(self.to_relative(pose))
         self.root_gate.start(frame, pose[self.body.translation_dofs])
+        self._learn_clothes()
         return self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
 
     def track(self, frame, next_frame=NEXT):
@@ -341,6 +366,7 @@ class Tracker:
         lam = self.energy.weights.adaptation if lam is None else lam
         if self.uses_color and lam > 0:
             self.energy.adapt_color_model(pose, lam)
+        self._learn_clothes()
         est = self._record(frame, pose, energy, time.perf_counter() - t0, evaluations, time.process_time() - c0)
         if self.first_evidence is not None:
             self._review_first_frame()
@@ -442,6 +468,7 @@ class Tracker:
                 "reference": [energy.reference_area, float(energy.reference_boundary)],
                 "limb_off_frames": dict(self.limb_recovery.off_frames),
                 "root_gate": self.root_gate.state(),
+                "clothes": None if self.clothes is None else self.clothes.state(),
                 "next_guide": None if self.next_guide is None else [int(self.next_guide[0]), self.next_guide[1]]}
 
     def restore(self, state):
@@ -454,6 +481,8 @@ class Tracker:
         self.energy.color_model, self.energy.color_count = state["color_model"]
         self.limb_recovery.off_frames = {str(k): int(v) for k, v in state.get("limb_off_frames", {}).items()}
         self.root_gate.restore(state.get("root_gate"))
+        if self.clothes is not None:
+            self.clothes.restore(state.get("clothes"))
         guide = state.get("next_guide")
         self.next_guide = None if guide is None else (int(guide[0]), np.asarray(guide[1], dtype=np.float64))
 
