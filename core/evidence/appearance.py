@@ -45,47 +45,38 @@ def _local_mask(shape, points, pad):
     return np.zeros((y1 - y0, x1 - x0), np.uint8), np.array([x0, y0])
 
 
-def _region_pixels(shape, uv, visible):
-    """(rows, cols) of the torso's and the thighs' pixels in a (height, width) picture from the landmarks (33,2)
-    and which are visible; None for a region the landmarks do not outline."""
-    out = []
+def _torso(shape, uv, visible):
+    """The torso's mask and its corner (see _local_mask), or None where the landmarks do not outline it."""
     corners = [SHOULDERS[0], SHOULDERS[1], HIPS[1], HIPS[0]]
-    torso = None
-    if all(visible[i] for i in corners):
-        quad = uv[corners]
-        quad = quad + TORSO_SHRINK * (quad.mean(axis=0) - quad)
-        mask, corner = _local_mask(shape, quad, 1)
-        if mask is not None:
-            cv2.fillConvexPoly(mask, np.round(quad - corner).astype(np.int32), 1)
-            torso = (mask, corner)
-    out.append(torso)
+    if not all(visible[i] for i in corners):
+        return None
+    quad = uv[corners]
+    quad = quad + TORSO_SHRINK * (quad.mean(axis=0) - quad)
+    mask, corner = _local_mask(shape, quad, 1)
+    if mask is None:
+        return None
+    cv2.fillConvexPoly(mask, np.round(quad - corner).astype(np.int32), 1)
+    return mask, corner
+
+
+def _thighs(shape, uv, visible):
+    """The thighs' mask (the middle of each visible thigh) and its corner, or None where no thigh is outlined."""
     strips = []
     for hip, knee in zip(HIPS, KNEES):
-        if not (visible[hip] and visible[knee]):
-            continue
         a, b = uv[hip], uv[knee]
-        length = float(np.linalg.norm(b - a))
-        if length >= 4:  # the strip's middle: away from the hip joint's edge and the knee
+        length = float(np.linalg.norm(b - a)) if visible[hip] and visible[knee] else 0.0
+        if length >= 4:  # away from the hip joint's edge and the knee
             strips.append((a + 0.2 * (b - a), a + 0.8 * (b - a), max(1, int(round(THIGH_WIDTH * length)))))
-    thighs = None
-    if strips:
-        ends = np.array([p for a, b, _ in strips for p in (a, b)])
-        mask, corner = _local_mask(shape, ends, max(t for *_, t in strips))
-        if mask is not None:
-            for a, b, thickness in strips:
-                cv2.line(mask, tuple(int(v) for v in np.round(a - corner)), tuple(int(v) for v in np.round(b - corner)),
-                         1, thickness)
-            thighs = (mask, corner)
-    out.append(thighs)
-    pixels = []
-    for region in out:
-        if region is None:
-            pixels.append(None)
-            continue
-        mask, (x0, y0) = region
-        ys, xs = np.nonzero(mask)
-        pixels.append((ys + y0, xs + x0))
-    return pixels
+    if not strips:
+        return None
+    ends = np.array([p for a, b, _ in strips for p in (a, b)])
+    mask, corner = _local_mask(shape, ends, max(t for *_, t in strips))
+    if mask is None:
+        return None
+    for a, b, thickness in strips:
+        cv2.line(mask, tuple(int(v) for v in np.round(a - corner)), tuple(int(v) for v in np.round(b - corner)), 1,
+                 thickness)
+    return mask, corner
 
 
 def picture_reference(image_bgr):
@@ -108,20 +99,23 @@ def _histogram(bgr_pixels, reference):
     return hist / max(hist.sum(), 1e-12)
 
 
-def clothes_signature(image_bgr, uv, visible, reference=None):
+def clothes_signature(image_bgr, uv, visible):
     """The clothes of the person whose landmarks are `uv` (33,2 pixels; `visible` (33,) bool) in `image_bgr`:
     {"torso": histogram, "thighs": histogram}, a region left out where the landmarks do not outline it or it has
     fewer than MIN_PIXELS pixels; None where neither is there."""
     uv = np.asarray(uv, dtype=np.float64)
     visible = np.asarray(visible, dtype=bool) & np.all(np.isfinite(uv), axis=1)
-    reference = picture_reference(image_bgr) if reference is None else reference
+    reference = picture_reference(image_bgr)
     out = {}
-    for name, region in zip(("torso", "thighs"), _region_pixels(image_bgr.shape, uv, visible)):
+    for name, region in (("torso", _torso(image_bgr.shape, uv, visible)),
+                         ("thighs", _thighs(image_bgr.shape, uv, visible))):
         if region is None:
             continue
-        ys, xs = region
+        mask, (x0, y0) = region
+        ys, xs = np.nonzero(mask)
         if len(ys) < MIN_PIXELS:
             continue
+        ys, xs = ys + y0, xs + x0
         step = max(1, len(ys) // MAX_PIXELS)  # a histogram of a few thousand pixels says as much as of all
         out[name] = _histogram(image_bgr[ys[::step], xs[::step]].astype(np.float64), reference)
     return out or None
