@@ -38,8 +38,9 @@ def _measured(props):
 
 
 def calibration_first(context):
-    """Whether Track fits the actor's build before tracking (Fit the Actor's Build): one actor tracked on this
-    Blender, not resuming, no calibration of this capture loaded, and a take at least Calibration Frames long."""
+    """Whether Track fits the actors' builds before tracking (Fit the Actor's Build): tracking on this Blender, not
+    resuming, no calibration of this capture loaded (one actor) or saved in every actor's folder (several,
+    cast_actor_file), and a take at least Calibration Frames long."""
     from ..core.errors import InputError
     from .setup_subject import subject_armatures
 
@@ -48,7 +49,12 @@ def calibration_first(context):
         return False  # (no capture: Track itself names the fix)
     capture = Path(bpy.path.abspath(props.capture_dir)).resolve()
     try:
-        if len(subject_armatures(context)) != 1 or _calibration_of(props.actor_file, capture):
+        armatures = subject_armatures(context)
+        if len(armatures) == 1:
+            fitted = calibration_made_on(props.actor_file, capture)
+        else:
+            fitted = all(calibration_made_on(str(cast_actor_file(context, a)), capture) for a in armatures)
+        if fitted:
             return False
         from .cmd_track import take_frames
 
@@ -57,7 +63,7 @@ def calibration_first(context):
         return False
 
 
-def _calibration_of(actor_file, capture):
+def calibration_made_on(actor_file, capture):
     """The loaded calibration (Subject panel) was made on this capture: Track uses it as 'Track with Calibration'
     says, and fits none."""
     if not actor_file:
@@ -73,8 +79,18 @@ def _calibration_of(actor_file, capture):
     return bool(made_on) and Path(made_on).resolve() == capture
 
 
+def cast_actor_file(context, armature):
+    """Where the build of one of several actors is saved: its result folder's actor.json (OUT/actors/<armature>/), as
+    `track --armature A --armature B` saves it."""
+    from .cast_session import ACTORS_FOLDER, actor_folder_name
+    from .track import output_folder
+
+    return Path(output_folder(context)) / ACTORS_FOLDER / actor_folder_name(armature.name) / "actor.json"
+
+
 def _inputs(context):
-    """The armature (the one Track solves), capture folder, output folder and tracking settings of the panels."""
+    """What to fit: [(armature, its output folder)] (one actor: the output folder; several: each one's folder of
+    cast_actor_file), the capture folder and the panels' tracking settings."""
     from .setup_subject import subject_armature, subject_armatures
     from .track import TrackSetupError, output_folder, run_settings
 
@@ -82,18 +98,24 @@ def _inputs(context):
     if not props.capture_dir:
         raise TrackSetupError("No capture folder: set it in Mocap > Capture and import the capture first")
     actors = subject_armatures(context)
-    armature = actors[0] if len(actors) == 1 else subject_armature(context)
+    if len(actors) > 1:
+        targets = [(a, cast_actor_file(context, a).parent) for a in actors]
+    else:
+        targets = [(actors[0] if len(actors) == 1 else subject_armature(context), output_folder(context))]
     settings, _ = run_settings(context)
-    return armature, Path(bpy.path.abspath(props.capture_dir)), output_folder(context), settings
+    return targets, Path(bpy.path.abspath(props.capture_dir)), settings
 
 
 def calibrate_here(context):
-    """Fit the actor on the panels' calibration frames on this thread and save it: (ProportionsFit, actor.json)."""
+    """Fit each actor on the panels' calibration frames on this thread and save it: [(ProportionsFit, actor.json)]
+    in the order of _inputs."""
     from .actor_calibration import calibrate_actor
 
-    armature, capture_dir, out_dir, settings = _inputs(context)
-    return calibrate_actor(context.scene, armature, capture_dir, out_dir, settings,
-                           frames=_calibration_frames(context.scene.mocap), measured=_measured(context.scene.mocap))
+    targets, capture_dir, settings = _inputs(context)
+    props = context.scene.mocap
+    return [calibrate_actor(context.scene, armature, capture_dir, out_dir, settings, frames=_calibration_frames(props),
+                            measured=_measured(props) if len(targets) == 1 else None)
+            for armature, out_dir in targets]
 
 
 def show_calibration(props, actor_path, lines):
@@ -102,13 +124,19 @@ def show_calibration(props, actor_path, lines):
     props.use_actor = True
 
 
-def report_calibration(operator, props, fit, path):
-    """A saved fit into the Subject panel (its summary, Track with Calibration on) and the status bar."""
+def report_calibration(operator, props, fits):
+    """Saved fits [(fit, actor.json)] into the Subject panel and the status bar: one actor's summary (Track with
+    Calibration on); several actors' each in its own folder, where Track finds them (cast_actor_file)."""
     from .actor_calibration import describe
 
-    lines = describe(fit)
-    show_calibration(props, path, lines)
-    operator.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
+    if len(fits) == 1:
+        fit, path = fits[0]
+        lines = describe(fit)
+        show_calibration(props, path, lines)
+        operator.report({"INFO"}, f"Actor calibrated: {lines[0]}; saved {path}")
+        return
+    said = "; ".join(f"{path.parent.name}: {describe(fit)[0]}" for fit, path in fits)
+    operator.report({"INFO"}, f"{len(fits)} actors calibrated ({said}); saved in their result folders")
 
 
 class MOCAP_OT_calibrate_actor(bpy.types.Operator):
@@ -133,8 +161,8 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         self.report({"ERROR"}, message)
         return {"CANCELLED"}
 
-    def _show_result(self, context, fit, path):
-        report_calibration(self, context.scene.mocap, fit, path)
+    def _show_result(self, context, fits):
+        report_calibration(self, context.scene.mocap, fits)
         if self.then_track:
             try:
                 bpy.ops.mocap.track("INVOKE_DEFAULT")
@@ -145,34 +173,40 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
     # ---- synchronous: background mode, scripts, tests, the GPU backend (bpy's gpu works on the main thread only)
     def execute(self, context):
         try:
-            fit, path = calibrate_here(context)
+            fits = calibrate_here(context)
         except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
             return self._fail(context, user_message(exc, "The calibration"))
-        return self._show_result(context, fit, path)
+        return self._show_result(context, fits)
 
     # ---- modal: the UI stays responsive while the worker tracks the calibration frames and fits
     def invoke(self, context, _event):
-        from .actor_calibration import CalibrationJob, open_calibration
-
         if context.window is None:
             return self.execute(context)
         props = context.scene.mocap
         try:
-            armature, capture_dir, out_dir, settings = _inputs(context)
+            targets, capture_dir, settings = _inputs(context)
             if settings.backend == "gpu":
                 return self.execute(context)
-            frames = _calibration_frames(props)
-            self._measured = _measured(props)  # checked before anything is tracked
-            session = open_calibration(context.scene, armature, capture_dir, out_dir, settings, frames=frames)
+            self._measured = _measured(props) if len(targets) == 1 else {}  # checked before anything is tracked
+            self._queue, self._capture, self._settings, self._fits = list(targets), capture_dir, settings, []
+            self._start_next(context)
         except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
             return self._fail(context, user_message(exc, "Starting the calibration"))
-        self._job = CalibrationJob(session, len(session.frames))
-        self._save_args = (out_dir, armature.name, capture_dir)
         props.last_error = ""
         props.is_calibrating = True
         props.calibration_status = "Calibrating: starting"
-        self._job.start()
         return begin_modal(self, context, 0.2)
+
+    def _start_next(self, context):
+        """Open the next actor's calibration (main thread: it reads the rig) and start its worker."""
+        from .actor_calibration import CalibrationJob, open_calibration
+
+        armature, out_dir = self._queue.pop(0)
+        session = open_calibration(context.scene, armature, self._capture, out_dir, self._settings,
+                                   frames=_calibration_frames(context.scene.mocap))
+        self._job = CalibrationJob(session, len(session.frames))
+        self._save_args = (out_dir, armature.name, self._capture)
+        self._job.start()
 
     def modal(self, context, event):
         job = self._job
@@ -192,6 +226,22 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         from .actor_calibration import save_calibration
 
         job = self._job
+        finished = job.error is None and job.fit is not None
+        if finished:
+            from ..core.actor.measured_lengths import with_measured
+
+            fit = with_measured(job.fit, job.session.character, self._measured)
+            try:
+                self._fits.append((fit, save_calibration(fit, *self._save_args)))
+            except Exception as exc:  # noqa: BLE001
+                job.error = (f"could not save the calibration: {user_message(exc, 'Saving it')}", None)
+                finished = False
+        if finished and self._queue:  # the next of several actors
+            try:
+                self._start_next(context)
+                return {"RUNNING_MODAL"}
+            except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
+                job.error, finished = (user_message(exc, "Starting the calibration"), None), False
         end_modal(self, context)
         props = context.scene.mocap
         props.is_calibrating = False
@@ -200,17 +250,12 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             if job.error[1]:
                 print(job.error[1])
             return self._fail(context, job.error[0])
-        if job.fit is None:  # cancelled before the fit
-            self.report({"WARNING"}, f"Calibration cancelled after {job.solved} frames; nothing saved")
+        if not finished:  # cancelled before the fit
+            saved = ", ".join(path.parent.name for _fit, path in self._fits)  # of several actors, those done
+            self.report({"WARNING"}, f"Calibration cancelled after {job.solved} frames; "
+                                     + (f"saved for {saved} only" if saved else "nothing saved"))
             return {"CANCELLED"}
-        from ..core.actor.measured_lengths import with_measured
-
-        fit = with_measured(job.fit, job.session.character, self._measured)
-        try:
-            path = save_calibration(fit, *self._save_args)
-        except Exception as exc:  # noqa: BLE001
-            return self._fail(context, f"could not save the calibration: {user_message(exc, 'Saving it')}")
-        return self._show_result(context, fit, path)
+        return self._show_result(context, self._fits)
 
     def cancel(self, context):
         """Blender ends the operator (file loaded, window closed): stop the worker, save nothing."""

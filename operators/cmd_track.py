@@ -286,7 +286,8 @@ def run_cast(args, scene, names, choice):
                             "(each actor is fitted on its own), or track each actor on its own")
         armatures = [find_armature(scene, name) for name in names]
         actors = None
-        if args.calibrate:  # each actor fitted as one alone, into its own result folder
+        if args.calibrate is not False:  # each actor's build fitted as one alone, into its own result folder, by
+            # default as for one actor (docs/measurements.md, "Other people in the room": the duet gains with it)
             from .cast_session import ACTORS_FOLDER, actor_folder_name
 
             actors = [load_actor_option(argparse.Namespace(**{**vars(args), "out": args.out / ACTORS_FOLDER /

@@ -113,10 +113,25 @@ def _cast_session(context, armatures, capture_dir, settings, choice, log, step):
     cast = CastSession(context.scene, armatures, capture_dir, output_folder(context), settings=settings,
                        frames=props.frame_range(), resume=props.resume, log=log, step=step,
                        units=None if props.units == "auto" else props.units, smooth_hz=props.smoothing_hz,
-                       foot_lock=props.foot_lock, foot_lock_speed=props.foot_lock_speed)
+                       foot_lock=props.foot_lock, foot_lock_speed=props.foot_lock_speed,
+                       actors=_cast_actors(context, armatures, capture_dir))
     for session in cast.sessions:
         session.writer.info["backend"] = choice.to_dict()  # report.json
     return cast
+
+
+def _cast_actors(context, armatures, capture_dir):
+    """Each actor's build fitted on this capture (Fit the Actor's Build saved it in the actor's result folder), or
+    None for an actor without one (tracked with the rig); None when the panel tracks with the rig."""
+    from ..core.actor.actor_file import load_actor
+    from .calibrate import calibration_made_on, cast_actor_file
+
+    if not context.scene.mocap.fit_actor_build:
+        return None
+    files = [cast_actor_file(context, a) for a in armatures]
+    capture = Path(capture_dir).resolve()
+    actors = [load_actor(f) if calibration_made_on(str(f), capture) else None for f in files]
+    return actors if any(a is not None for a in actors) else None
 
 
 class TrackJob(WorkerJob):
@@ -385,12 +400,12 @@ class MOCAP_OT_track(bpy.types.Operator):
             return True
         props = context.scene.mocap
         try:
-            fit, path = calibrate_here(context)
+            fits = calibrate_here(context)
         except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
             props.last_error = user_message(exc, "Fitting the actor's build")
             self.report({"ERROR"}, f"{props.last_error} (untick Fit the Actor's Build to track with the rig's)")
             return False
-        report_calibration(self, props, fit, path)
+        report_calibration(self, props, fits)
         return True
 
     def _run_foreground(self, context, job, session):

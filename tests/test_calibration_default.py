@@ -171,3 +171,83 @@ def test_a_failed_fit_stops_track_with_the_reason_and_the_way_out(addon_module_n
     with pytest.raises(RuntimeError, match="no frame has 10 triangulated landmarks.*untick Fit the Actor's Build"):
         bpy.ops.mocap.track()
     assert session.last is None and "no frame has 10 triangulated landmarks" in m.last_error  # nothing tracked
+
+
+# ---- several actors: each one's build, by default too
+def test_several_actors_are_each_fitted_by_default_into_their_own_folders(recorded_calibrations, tmp_path,
+                                                                           monkeypatch):
+    """`track --armature Lead --armature Partner` fits each actor (as one alone) into OUT/actors/<armature>/ on a
+    long enough take, and hands the cast each one's fit; --no-calibrate tracks both with the rig."""
+    pytest.importorskip("bpy")
+    from markerless_mocap.operators import cast_session, cmd_track
+
+    duet = scene_dir("duet")  # 60 frames
+    given = []
+
+    class Cast:
+        def __init__(self, *args, actors=None, **kwargs):
+            given.append(actors)
+            raise cast_session.CastError("stop here")
+
+    monkeypatch.setattr(cast_session, "CastSession", Cast)
+
+    class Armature:
+        def __init__(self, name):
+            self.name = name
+
+    monkeypatch.setattr("markerless_mocap.addon.scene_bridge.find_armature", lambda scene, name: Armature(name))
+    choice = argparse.Namespace(used="numpy")
+    for extra in ([], ["--no-calibrate"]):
+        args = argparse.ArgumentParser()
+        cmd_track.add_arguments(args)
+        args = args.parse_args(["--capture", str(duet), "--out", str(tmp_path / "o"), *extra])
+        assert cmd_track.run_cast(args, None, ["Lead", "Partner"], choice) == 2
+    out = tmp_path / "o" / "actors"
+    assert given == [[{"loaded": str(out / "Lead" / "actor.json")}, {"loaded": str(out / "Partner" / "actor.json")}],
+                     None]
+    assert recorded_calibrations == [None, None]  # each on the take's first 20 frames
+
+
+@pytest.mark.bpy
+def test_track_every_armature_in_blender_fits_each_actor_first_and_reuses_the_fits(addon_module_name, bpy_module,
+                                                                                   monkeypatch, tmp_path):
+    """The Track panel with Track Every Armature: each actor's build is fitted into its result folder before
+    tracking, the cast gets both fits, a second Track reuses them, and with Fit the Actor's Build off it gets none."""
+    from test_actor_ui import _fit
+
+    mod = lambda name: importlib.import_module(f"{addon_module_name}.{name}")
+    bpy = bpy_module
+    duet = scene_dir("duet")
+    bpy.ops.wm.open_mainfile(filepath=str(duet / "subject.blend"))
+    calls, given = [], []
+
+    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, **_):
+        calls.append((armature.name, Path(out_dir).name, list(frames)))
+        body = mod("addon.scene_bridge").body_from_blender(armature, None, scene)
+        fit = _fit(body, mod("core.actor.proportions"), mod("core.actor.landmark_fit"))
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        return fit, mod("core.actor.actor_file").save_actor(Path(out_dir) / "actor.json", fit,
+                                                            subject_name=armature.name,
+                                                            capture=Path(capture_dir).resolve())
+
+    class Cast:
+        def __init__(self, *args, actors=None, **kwargs):
+            given.append(actors)
+            raise mod("operators.cast_session").CastError("stop here")
+
+    monkeypatch.setattr(mod("operators.actor_calibration"), "calibrate_actor", fake_calibrate)
+    monkeypatch.setattr(mod("operators.cast_session"), "CastSession", Cast)
+    m = bpy.context.scene.mocap
+    m.every_armature = True
+    m.capture_dir, m.output_dir = str(duet), str(tmp_path / "out")
+    m.use_frame_range, m.frame_start, m.frame_end, m.calibrate_frames = True, 0, 29, 20
+    for _ in range(2):
+        with pytest.raises(RuntimeError, match="stop here"):
+            bpy.ops.mocap.track()
+    assert calls == [("Lead", "Lead", list(range(20))), ("Partner", "Partner", list(range(20)))]  # fitted once
+    assert len(given) == 2 and all(len(a) == 2 and all(x["height_m"] > 0 for x in a) for a in given)
+    assert not m.use_actor  # one actor's 'Track with Calibration' is left alone
+    m.fit_actor_build = False
+    with pytest.raises(RuntimeError, match="stop here"):
+        bpy.ops.mocap.track()
+    assert given[-1] is None
