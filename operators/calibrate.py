@@ -51,9 +51,9 @@ def calibration_first(context):
     try:
         armatures = subject_armatures(context)
         if len(armatures) == 1:
-            fitted = calibration_made_on(props.actor_file, capture)
+            fitted = calibration_made_on(props.actor_file, capture) is not None
         else:
-            fitted = all(calibration_made_on(str(cast_actor_file(context, a)), capture) for a in armatures)
+            fitted = all(calibration_made_on(str(cast_actor_file(context, a)), capture) is not None for a in armatures)
         if fitted:
             return False
         from .cmd_track import take_frames
@@ -64,19 +64,19 @@ def calibration_first(context):
 
 
 def calibration_made_on(actor_file, capture):
-    """The loaded calibration (Subject panel) was made on this capture: Track uses it as 'Track with Calibration'
-    says, and fits none."""
+    """The calibration in `actor_file` (the Subject panel's, or one of several actors' saved by Track) if it was made
+    on this capture, else None: Track then uses it and fits none."""
     if not actor_file:
-        return False
+        return None
     from ..core.actor.actor_file import load_actor
     from ..core.errors import InputError
 
     try:
         data = load_actor(bpy.path.abspath(actor_file))
     except (InputError, OSError):
-        return False
+        return None
     made_on = data.get("capture")
-    return bool(made_on) and Path(made_on).resolve() == capture
+    return data if made_on and Path(made_on).resolve() == capture else None
 
 
 def cast_actor_file(context, armature):

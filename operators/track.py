@@ -123,14 +123,12 @@ def _cast_session(context, armatures, capture_dir, settings, choice, log, step):
 def _cast_actors(context, armatures, capture_dir):
     """Each actor's build fitted on this capture (Fit the Actor's Build saved it in the actor's result folder), or
     None for an actor without one (tracked with the rig); None when the panel tracks with the rig."""
-    from ..core.actor.actor_file import load_actor
     from .calibrate import calibration_made_on, cast_actor_file
 
     if not context.scene.mocap.fit_actor_build:
         return None
-    files = [cast_actor_file(context, a) for a in armatures]
     capture = Path(capture_dir).resolve()
-    actors = [load_actor(f) if calibration_made_on(str(f), capture) else None for f in files]
+    actors = [calibration_made_on(str(cast_actor_file(context, a)), capture) for a in armatures]
     return actors if any(a is not None for a in actors) else None
 
 

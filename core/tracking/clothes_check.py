@@ -35,7 +35,7 @@ class ClothesCheck:
         learned yet)."""
         out = np.full(len(evidence), np.nan)
         for c, ev in enumerate(evidence):
-            value = likeness(getattr(ev, "clothes", None), self.exemplars) if ev.found else None
+            value = likeness(ev.clothes, self.exemplars) if ev.found else None
             if value is not None:
                 out[c] = value
         return out
@@ -55,7 +55,7 @@ class ClothesCheck:
         if self.learned_frames >= self.learn_frames or evidence is None:
             return
         new = [ev.clothes for ev, keep in zip(evidence, kept)
-               if keep and ev.found and getattr(ev, "clothes", None)]
+               if keep and ev.found and ev.clothes]
         if new:
             self.exemplars.extend(new)
             self.learned_frames += 1
