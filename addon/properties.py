@@ -138,10 +138,11 @@ class MocapSettings(bpy.types.PropertyGroup):
                                         "rotations (root path rescaled to the rig)")
     # on by default: it measured at least as good as the rig on every sample scene (docs/actor-calibration.md)
     fit_actor_build: BoolProperty(name="Fit the Actor's Build", default=True,
-                                  description="Before tracking one actor, fit the actor's proportions on the first "
+                                  description="Before tracking, fit each actor's proportions on the first "
                                               "Calibration Frames of the take (Subject > Actor Calibration) unless "
-                                              "a calibration of this capture is loaded; a take shorter than that "
-                                              "keeps the rig's. Off: track with the rig's own proportions")
+                                              "a calibration of this capture is loaded (several actors: saved in "
+                                              "their result folders); a take shorter than that keeps the rig's. "
+                                              "Off: track with the rig's own proportions")
 
     # ---- tracker
     algorithm: _enum("algorithm")

@@ -225,7 +225,7 @@ log "UI on Xvfb :$display: Import, Check, Track (the actor's fit, then tracking)
 t1=$(date +%s)
 drive_ui 420 /mnt/out/ui > "$out/ui.log" 2>&1 || fail "the UI run exited with $?; see $out/ui.log"
 # several actors: the Track button (modal) with 'Track Every Armature' on the duet scene's two armatures
-timeout 300 chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURCES=/mnt/out/blender_user \
+timeout 480 chroot "$root" /usr/bin/env DISPLAY=":$display" BLENDER_USER_RESOURCES=/mnt/out/blender_user \
   PYTHONDONTWRITEBYTECODE=1 NUMBA_CACHE_DIR=/var/cache/mocap-numba MOCAP_CACHE_DIR=/var/cache/mocap-motion \
   blender "$src/sample_scenes/duet/subject.blend" --window-geometry 0 0 1600 1200 \
   --python "$src/tests/real_blender/two_actors.py" -- "$src/sample_scenes/duet" /mnt/out/two_actors \

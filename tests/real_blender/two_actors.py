@@ -2,9 +2,11 @@
 `blender duet/subject.blend --python two_actors.py -- CAPTURE OUT` (with `-b`: the operator's synchronous path).
 
 What a user does in the Subject and Track panels for several actors: tick 'Track Every Armature', set the capture
-and output folders and a short frame range, press Track (in the UI the modal operator, watched from a timer as the
-window keeps drawing). Both armatures must be keyed on every tracked frame, each actor's result folder written, the
-UI never stalled more than 5 s.
+and output folders and a short frame range, press Track with Fit the Actor's Build on (the default) and 3
+calibration frames: each actor's build is fitted in turn (in the UI the modal calibration, one actor after the
+other), then both are tracked (the modal Track), watched from a timer as the window keeps drawing. Both actors'
+fits must be saved in their result folders (actors/<armature>/actor.json, made on this capture), both armatures
+keyed on every tracked frame, each actor's result folder written, the UI never stalled more than 5 s.
 """
 import json
 import sys
@@ -21,26 +23,32 @@ m.capture_dir = capture
 m.output_dir = out
 m.use_frame_range, m.frame_start, m.frame_end = True, 0, 2
 m.preset = "preview"
-state = {"ticks": []}
+m.fit_actor_build, m.calibrate_frames = True, 3
+state = {"ticks": [], "calibrating_seen": False}
 
 
 def check_and_end(result):
     """Print what was keyed where (STAGE lines the stage greps) and end Blender, 0 when both actors are keyed."""
     report = {"armatures": armatures, "result": sorted(result), "status": m.status, "error": m.last_error,
-              "keys": {}, "modal": not bpy.app.background}
+              "keys": {}, "modal": not bpy.app.background, "calibrating_seen": state["calibrating_seen"]}
     for name in armatures:
         arm = bpy.context.scene.objects[name]
         frames = []
         for f in range(bpy.context.scene.frame_start, bpy.context.scene.frame_end + 1):
             bpy.context.scene.frame_set(f)
             frames.append([round(v, 4) for v in (arm.matrix_world @ arm.pose.bones["Hips"].matrix).translation])
+        fit = Path(out) / "actors" / name / "actor.json"
+        made_on = json.loads(fit.read_text()).get("capture") if fit.is_file() else None
         report["keys"][name] = {"keyed": arm.animation_data is not None and arm.animation_data.action is not None,
-                                "hips": frames, "folder": (Path(out) / "actors" / name / "joints.npz").is_file()}
+                                "hips": frames, "folder": (Path(out) / "actors" / name / "joints.npz").is_file(),
+                                "fitted": made_on is not None and Path(made_on).resolve() == Path(capture).resolve()}
     gaps = [b - a for a, b in zip(state["ticks"], state["ticks"][1:])]
     report["max_ui_gap_s"] = round(max(gaps), 2) if gaps else None
-    started = ["FINISHED"] if bpy.app.background else ["RUNNING_MODAL"]
+    # in the UI Track hands over to the modal calibration (FINISHED), which starts the modal Track once both are fitted
+    started = ["FINISHED"]
     ok = (report["result"] == started and len(armatures) == 2 and m.status.startswith("Tracked 3 frames")
-          and all(k["keyed"] and k["folder"] for k in report["keys"].values())
+          and (bpy.app.background or state["calibrating_seen"])
+          and all(k["keyed"] and k["folder"] and k["fitted"] for k in report["keys"].values())
           and (Path(out) / "tracked.blend").is_file()
           and (bpy.app.background or (report["max_ui_gap_s"] is not None and report["max_ui_gap_s"] < 5)))
     hips = [report["keys"][n]["hips"][0] for n in armatures]
@@ -48,7 +56,8 @@ def check_and_end(result):
     ok = ok and apart > 0.3  # each keyed on its own person, not both on one
     how = "modal, in the UI" if not bpy.app.background else "in the background"
     print(f"STAGE two actors from the Track panel ({how}): {'keyed both' if ok else 'FAILED'} ({', '.join(armatures)}; "
-          f"{m.status!r}; hips {apart:.2f} m apart at the first frame; longest UI gap {report['max_ui_gap_s']} s) "
+          f"{m.status!r}; builds fitted: {sum(k['fitted'] for k in report['keys'].values())}; hips {apart:.2f} m apart "
+          f"at the first frame; longest UI gap {report['max_ui_gap_s']} s) "
           f"{m.last_error}", flush=True)
     print("STAGE-JSON " + json.dumps(report), flush=True)
     if bpy.app.background:
@@ -67,9 +76,10 @@ def press_track():
 
 
 def watch():
-    """Every 0.2 s while the modal Track runs: the UI must keep ticking."""
+    """Every 0.2 s while the modal calibration, then the modal Track, run: the UI must keep ticking."""
     state["ticks"].append(time.perf_counter())
-    if m.is_tracking and time.perf_counter() - state["t0"] < 300:
+    state["calibrating_seen"] |= m.is_calibrating
+    if (m.is_calibrating or m.is_tracking) and time.perf_counter() - state["t0"] < 420:
         return 0.2
     check_and_end(state["result"])
     return None
