@@ -398,6 +398,26 @@ SCENES["duet_dev"] = dict(
                  turn=(26, 18, -110), proportions=SCENES["actor5"]["proportions"], proportions_from="actor5",
                  colours={"shirt": (0.03, 0.06, 0.2), "trousers": (0.1, 0.1, 0.1), "hair": (0.05, 0.04, 0.03)}),
     handshake=dict(first_frame=60, frames_in=6, above_hips_m=0.18))
+# issue 42's second DEVELOPMENT scene for several actors, rendered on 2026-12-06: the duet's handshake (which
+# duet_dev lacks) with everything else other, so that the hands and arms of two actors who touch can be tuned
+# without the held-out duet. The Lead stands before 131_01's walk (source frames 0-59) with actor6's build (narrow
+# shoulders, short arms); the Partner walks 131_01 from source frame 166 with actor8's build (short, long forearms),
+# slows to a stop in front of the Lead and they shake hands from frame 38. Unlike the duet the Partner hides the Lead
+# in cam1 from the first frame (frames 0-13), then in cam4 (32-59); the Lead hides the Partner in cam2 (35-59).
+SCENES["handshake_dev"] = dict(
+    bvh="131_01.bvh", start=0, n_frames=60, seed=5151, uncontrolled=False, calibration="toml",
+    cameras_from_facing=True,
+    cameras=[
+        (316, 3.9, 1.60, 530, (3.0, -4.0), 0.5),
+        (176, 3.8, 1.50, 520, (-4.0, 3.0), -0.9),
+        (81, 3.8, 1.75, 545, (5.0, 2.0), 0.7),
+        (352, 3.6, 1.55, 520, (-3.0, -5.0), -0.5)],
+    colours={"shirt": (0.04, 0.1, 0.14), "trousers": (0.12, 0.1, 0.07)},
+    proportions=SCENES["actor6"]["proportions"], proportions_from="actor6", armature="Lead",
+    partner=dict(name="Partner", bvh="131_01.bvh", start=166, stop=(-15, 0.85), facing_offset_deg=0,
+                 turn=(16, 18, 100), proportions=SCENES["actor8"]["proportions"], proportions_from="actor8",
+                 colours={"shirt": (0.2, 0.06, 0.03), "trousers": (0.03, 0.03, 0.035), "hair": (0.08, 0.05, 0.03)}),
+    handshake=dict(first_frame=38, frames_in=6, above_hips_m=0.18))
 # issue 44 (a shoot day on a cluster): a long uncontrolled take for chunked `batch` tracking and its wall time.
 # 01_01 is the only clip long enough (688 frames at 30 fps): source frames 40-639 jump forward 3.3 m, turn round,
 # jump back, turn round again and jump on; arm gestures keyed on top every 60-70 frames. Playground's kind of room
