@@ -4,7 +4,8 @@
 #   2. enable the add-on from this checkout, run `blender -b SUBJECT --command markerless_mocap track`
 #      on a sample scene (few frames, small budget) and check every result file
 #   3. start the UI under Xvfb and drive Import, Check, Track (the actor's fit first, then tracking; both modal),
-#      Esc and Export, with screenshots; then Track (modal) for the duet scene's two armatures
+#      Esc and Export, with screenshots; then Track (modal) for the duet scene's two armatures, each actor's build
+#      fitted first (modal, one after the other)
 # Exit 0 = passed, 77 = skipped (cannot provision here; the reason is printed), anything else = failed.
 #   bash tests/real_blender/stage.sh [--provision-only | --resave-subjects | --readme-screenshot]
 #   --readme-screenshot: track the walk scene whole with the defaults in the UI and save the sidebar's picture
