@@ -106,6 +106,12 @@ def _inputs(context):
     return targets, Path(bpy.path.abspath(props.capture_dir)), settings
 
 
+def _measured_for(props, targets):
+    """The lengths measured on the actor (Subject panel) when one actor is fitted; several are fitted on the footage
+    alone (the panel holds one actor's measurements)."""
+    return _measured(props) if len(targets) == 1 else None
+
+
 def calibrate_here(context):
     """Fit each actor on the panels' calibration frames on this thread and save it: [(ProportionsFit, actor.json)]
     in the order of _inputs."""
@@ -114,7 +120,7 @@ def calibrate_here(context):
     targets, capture_dir, settings = _inputs(context)
     props = context.scene.mocap
     return [calibrate_actor(context.scene, armature, capture_dir, out_dir, settings, frames=_calibration_frames(props),
-                            measured=_measured(props) if len(targets) == 1 else None)
+                            measured=_measured_for(props, targets))
             for armature, out_dir in targets]
 
 
@@ -187,7 +193,7 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             targets, capture_dir, settings = _inputs(context)
             if settings.backend == "gpu":
                 return self.execute(context)
-            self._measured = _measured(props) if len(targets) == 1 else {}  # checked before anything is tracked
+            self._measured = _measured_for(props, targets)  # checked before anything is tracked
             self._queue, self._capture, self._settings, self._fits = list(targets), capture_dir, settings, []
             self._start_next(context)
         except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
