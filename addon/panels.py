@@ -115,8 +115,13 @@ def _draw_calibration(box, props, context):
     """Calibrate step: frames to use, the fitted proportions, a copy of the rig with them."""
     box.label(text="Actor Calibration", icon="CON_SIZELIKE")
     box.prop(props, "calibrate_frames")
-    box.prop(props, "actor_height")
-    _draw_measured_segments(box, props)
+    actors = ticked_armatures(context.scene) if props.every_armature else []
+    if len(actors) > 1:  # each actor's tape measure on its own armature
+        for ob in actors:
+            _draw_measured_segments(box, ob.mocap_measured, f"MOCAP_measured_{ob.name}", f"{ob.name}: ", height=True)
+    else:
+        box.prop(props, "actor_height")
+        _draw_measured_segments(box, props, "MOCAP_measured_lengths")
     box.operator("mocap.calibrate_actor", icon="MOD_ARMATURE")
     if props.is_calibrating:
         box.progress(factor=props.calibration_progress, type="BAR", text=props.calibration_status)
@@ -148,16 +153,18 @@ def _draw_actor_summary(layout, props, context):
         _wrapped(body, line, context)
 
 
-def _draw_measured_segments(layout, props):
-    """The segments measured on the actor, folded away: most users measure at most the height."""
-    header, body = layout.panel("MOCAP_measured_lengths", default_closed=True)
-    set_count = sum(getattr(props, f"actor_{key}") > 0 for key, _label, _where in MEASURED_SEGMENTS)
-    header.label(text=f"Measured Lengths ({set_count} set)" if set_count else "Measured Lengths")
+def _draw_measured_segments(layout, holder, idname, whose="", height=False):
+    """The segments measured on an actor (`holder`: the panel's settings, or an armature's mocap_measured), folded
+    away: most users measure at most the height. `height`: the height inside too (several actors)."""
+    keys = [("height", "Height")] * height + [(key, label) for key, label, _where in MEASURED_SEGMENTS]
+    header, body = layout.panel(idname, default_closed=True)
+    set_count = sum(getattr(holder, f"actor_{key}") > 0 for key, _label in keys)
+    header.label(text=f"{whose}Measured Lengths" + (f" ({set_count} set)" if set_count else ""))
     if body is None:
         return
     body.label(text="0: as the footage gives it")
-    for key, label, _where in MEASURED_SEGMENTS:
-        body.prop(props, f"actor_{key}", text=label)
+    for key, label in keys:
+        body.prop(holder, f"actor_{key}", text=label)
 
 
 class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):

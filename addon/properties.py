@@ -87,10 +87,33 @@ def _measured_length(segment):
                                      "calibrated body gets exactly this length (0: as the footage gives it)")
 
 
+def measured_length_fields():
+    """{field: property} of the lengths a user can measure on an actor: the height and MEASURED_SEGMENTS."""
+    height = FloatProperty(name="Measured Height", default=0.0, min=0.0, max=3.0, precision=3,
+                           subtype="DISTANCE", unit="LENGTH",
+                           description="The actor's height if you have measured it: the calibrated body is "
+                                       "scaled to it (0: as the footage gives it)")
+    # the footage reads some lengths only within 5-10 % (docs/actor-calibration.md); a tape measure's win
+    return {"actor_height": height, **{f"actor_{key}": _measured_length(key) for key, _l, _w in MEASURED_SEGMENTS}}
+
+
+def with_measured_lengths(cls):
+    """The class with measured_length_fields as properties (the Subject panel's for one actor, each armature's
+    for several)."""
+    cls.__annotations__.update(measured_length_fields())
+    return cls
+
+
+@with_measured_lengths
+class MocapMeasuredLengths(bpy.types.PropertyGroup):
+    """One actor's measured lengths on its armature (Object.mocap_measured): with several actors each has its own."""
+
+
 def _is_armature(_self, obj):
     return obj.type == "ARMATURE"
 
 
+@with_measured_lengths
 class MocapSettings(bpy.types.PropertyGroup):
     # ---- capture
     capture_dir: StringProperty(
@@ -115,20 +138,7 @@ class MocapSettings(bpy.types.PropertyGroup):
     calibrate_frames: IntProperty(name="Calibration Frames", default=20, min=3, soft_max=60,
                                   description="Fit the actor's proportions on this many frames from the start of "
                                               "the tracked range")
-    actor_height: FloatProperty(name="Measured Height", default=0.0, min=0.0, max=3.0, precision=3,
-                                subtype="DISTANCE", unit="LENGTH",
-                                description="The actor's height if you have measured it: the calibrated body is "
-                                            "scaled to it (0: as the footage gives it)")
-    # the footage reads some lengths only within 5-10 % (docs/actor-calibration.md); a tape measure's win
-    actor_spine: _measured_length("spine")
-    actor_neck: _measured_length("neck")
-    actor_shoulder_width: _measured_length("shoulder_width")
-    actor_hip_width: _measured_length("hip_width")
-    actor_upper_arm: _measured_length("upper_arm")
-    actor_forearm: _measured_length("forearm")
-    actor_thigh: _measured_length("thigh")
-    actor_shin: _measured_length("shin")
-    actor_foot: _measured_length("foot")
+    # actor_height, actor_spine, ...: one actor's measured lengths (with_measured_lengths)
     actor_file: StringProperty(name="Actor Calibration", subtype="FILE_PATH",
                                description="actor.json of the calibration (written by Calibrate Actor, or of an "
                                            "earlier take of the same actor)")
@@ -237,7 +247,7 @@ class MocapSettings(bpy.types.PropertyGroup):
         return settings_from_choices(self)
 
 
-classes = (MocapSettings,)
+classes = (MocapMeasuredLengths, MocapSettings)
 
 
 @bpy.app.handlers.persistent
@@ -267,6 +277,7 @@ def register():
         name="Track", default=True,
         description="With 'Track Every Armature': track this armature as one of the actors (untick a character "
                     "that is only there to receive the motion)")
+    bpy.types.Object.mocap_measured = PointerProperty(type=MocapMeasuredLengths)
     bpy.app.handlers.load_post.append(reset_run_state)
 
 
@@ -275,5 +286,6 @@ def unregister():
         bpy.app.handlers.load_post.remove(reset_run_state)
     del bpy.types.Scene.mocap
     del bpy.types.Object.mocap_actor
+    del bpy.types.Object.mocap_measured
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -17,9 +17,10 @@ def _calibration_frames(props):
     return range(start, end + 1)
 
 
-def _measured(props):
-    """The lengths measured on the actor that the panel holds ({"height" or segment: metres}), those set (> 0);
-    a MeasuredLengthError naming the field of one that is no length of a person."""
+def _measured(props, whose=""):
+    """The lengths measured on the actor that `props` holds (the panel's settings, or an armature's
+    mocap_measured): {"height" or segment: metres}, those set (> 0); a MeasuredLengthError naming the field (after
+    `whose`) of one that is no length of a person."""
     from ..addon.properties import MEASURED_SEGMENTS
     from ..core.actor.measured_lengths import MeasuredLengthError, checked_length
 
@@ -33,7 +34,7 @@ def _measured(props):
             measured[name] = checked_length(name, metres)
         except MeasuredLengthError as exc:
             label = props.bl_rna.properties[field].name
-            raise MeasuredLengthError(f"{label}: {exc}") from None
+            raise MeasuredLengthError(f"{whose}{label}: {exc}") from None
     return measured
 
 
@@ -107,9 +108,11 @@ def _inputs(context):
 
 
 def _measured_for(props, targets):
-    """The lengths measured on the actor (Subject panel) when one actor is fitted; several are fitted on the footage
-    alone (the panel holds one actor's measurements)."""
-    return _measured(props) if len(targets) == 1 else None
+    """Per target (armature, folder) the lengths measured on its actor: the Subject panel's for one actor, each
+    armature's own (Object.mocap_measured) for several."""
+    if len(targets) == 1:
+        return [_measured(props)]
+    return [_measured(armature.mocap_measured, f"{armature.name}: ") for armature, _folder in targets]
 
 
 def calibrate_here(context):
@@ -119,9 +122,10 @@ def calibrate_here(context):
 
     targets, capture_dir, settings = _inputs(context)
     props = context.scene.mocap
+    measured = _measured_for(props, targets)
     return [calibrate_actor(context.scene, armature, capture_dir, out_dir, settings, frames=_calibration_frames(props),
-                            measured=_measured_for(props, targets))
-            for armature, out_dir in targets]
+                            measured=lengths)
+            for (armature, out_dir), lengths in zip(targets, measured)]
 
 
 def show_calibration(props, actor_path, lines):
@@ -193,8 +197,9 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             targets, capture_dir, settings = _inputs(context)
             if settings.backend == "gpu":
                 return self.execute(context)
-            self._measured = _measured_for(props, targets)  # checked before anything is tracked
-            self._queue, self._capture, self._settings, self._fits = list(targets), capture_dir, settings, []
+            measured = _measured_for(props, targets)  # checked before anything is tracked
+            self._queue = [(armature, out_dir, lengths) for (armature, out_dir), lengths in zip(targets, measured)]
+            self._capture, self._settings, self._fits = capture_dir, settings, []
             self._start_next(context)
         except Exception as exc:  # noqa: BLE001  (the user's set-up names its fix; anything else is a bug)
             return self._fail(context, user_message(exc, "Starting the calibration"))
@@ -207,7 +212,7 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
         """Open the next actor's calibration (main thread: it reads the rig) and start its worker."""
         from .actor_calibration import CalibrationJob, open_calibration
 
-        armature, out_dir = self._queue.pop(0)
+        armature, out_dir, self._measured = self._queue.pop(0)
         session = open_calibration(context.scene, armature, self._capture, out_dir, self._settings,
                                    frames=_calibration_frames(context.scene.mocap))
         self._job = CalibrationJob(session, len(session.frames))

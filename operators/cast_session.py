@@ -45,18 +45,24 @@ def actor_folder_name(name):
     return re.sub(r'[<>:"/\\|?*\x00-\x1f]', "_", name).strip(" .") or "armature"
 
 
+def cast_folders(names):
+    """Each actor's result folder name under actors/; a CastError when the armatures cannot be tracked together
+    (checked before any actor's build is fitted)."""
+    if len(names) < 2:
+        raise CastError("several actors need at least two armatures; track one with the usual command")
+    folders = [actor_folder_name(n) for n in names]
+    if len(set(names)) != len(names):
+        raise CastError(f"an armature is given twice ({', '.join(names)}): name each actor's armature once")
+    if len(set(folders)) != len(folders):
+        raise CastError(f"the armatures {names} give the same result folder name: rename them (each actor's "
+                        "result folder is named after its armature)")
+    return folders
+
+
 class CastSession:
     def __init__(self, scene, armatures, capture_dir, out_dir, actors=None, **options):
         """`actors`: per armature an actor calibration (core/actor/actor_file.load_actor's dict) or None."""
-        names = [a.name for a in armatures]
-        if len(armatures) < 2:
-            raise CastError("several actors need at least two armatures; track one with the usual command")
-        folders = [actor_folder_name(n) for n in names]
-        if len(set(names)) != len(names):
-            raise CastError(f"an armature is given twice ({', '.join(names)}): name each actor's armature once")
-        if len(set(folders)) != len(folders):
-            raise CastError(f"the armatures {names} give the same result folder name: rename them (each actor's "
-                            "result folder is named after its armature)")
+        folders = cast_folders([a.name for a in armatures])
         self.out = require_writable_folder(out_dir)
         self.folders = folders
         self.sessions = []

@@ -68,13 +68,16 @@ def add_arguments(p):
                             f"actor on a take of at least {DEFAULT_FRAMES} frames; given, it fits on a shorter one)")
     actor.add_argument("--no-calibrate", dest="calibrate", action="store_false",
                        help="track with the rig's own proportions (no actor calibration)")
-    actor.add_argument("--actor", type=Path, help="reuse a saved actor calibration (actor.json of an earlier take)")
+    actor.add_argument("--actor", action="append", metavar="[ARMATURE=]FILE",
+                       help="reuse a saved actor calibration (actor.json of an earlier take); with several armatures "
+                            "name whose, as in Partner=FILE, and repeat it for each actor")
     p.add_argument("--calibrate-frames", help="frames A-B for --calibrate (default: the first 20 tracked)")
     p.add_argument("--calibrate-landmarks-only", action="store_true",
                    help="--calibrate from the landmarks alone (default: then refined against the person masks)")
-    p.add_argument("--calibrate-measured", action="append", metavar="SEGMENT=METRES",
+    p.add_argument("--calibrate-measured", action="append", metavar="[ARMATURE:]SEGMENT=METRES",
                    help="--calibrate with a length measured on the actor in place of the footage's (height, "
-                        "forearm, ...; repeat for several)")
+                        "forearm, ...; repeat for several); with several armatures name whose, as in "
+                        "Partner:height=1.62")
     p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
                    help=f"low-pass the finished take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: keep the poses as "
                         "solved); the solved poses stay in joints_raw.npz / poses_raw.npz")
@@ -159,15 +162,17 @@ def load_actor_option(args, scene, armature, backend=None):
     from ..core.actor.actor_file import load_actor
     from ..core.actor.measured_lengths import parse_measured
     from ..core.errors import InputError
+    from .actor_options import options_of
 
     asked = getattr(args, "calibrate", None)  # True: --calibrate, False: --no-calibrate, None: the default
-    measured = parse_measured(getattr(args, "calibrate_measured", None))
-    if measured and (asked is False or getattr(args, "actor", None) is not None):
+    saved, measured_items = options_of(args, getattr(armature, "name", None))
+    measured = parse_measured(measured_items)
+    if measured and (asked is False or saved is not None):
         raise InputError("--calibrate-measured applies to the actor calibration; with --actor the saved calibration's "
                          "lengths are used (calibrate again with --measured to change them), with --no-calibrate "
                          "none is made")
-    if getattr(args, "actor", None) is not None:
-        return load_actor(args.actor)
+    if saved is not None:
+        return load_actor(saved)
     if asked is False:
         return None
     if args.resume:
@@ -277,22 +282,18 @@ def solve_all(session, out):
 def run_cast(args, scene, names, choice):
     """`track` with several --armature: every actor in one frame loop (operators/cast_session.py)."""
     from ..addon.scene_bridge import find_armature
-    from .cast_session import CastError, CastSession
+    from .cast_session import ACTORS_FOLDER, CastSession, cast_folders
     from .failures import USER_ERRORS, cli_failure
 
     try:
-        if args.actor is not None or args.calibrate_measured:
-            raise CastError("--actor and --calibrate-measured are one actor's: with several armatures use --calibrate "
-                            "(each actor is fitted on its own), or track each actor on its own")
         armatures = [find_armature(scene, name) for name in names]
-        actors = None
-        if args.calibrate is not False:  # each actor's build fitted as one alone, into its own result folder, by
-            # default as for one actor (docs/measurements.md, "Other people in the room": the duet gains with it)
-            from .cast_session import ACTORS_FOLDER, actor_folder_name
-
-            actors = [load_actor_option(argparse.Namespace(**{**vars(args), "out": args.out / ACTORS_FOLDER /
-                                                                actor_folder_name(a.name)}), scene, a, choice.used)
-                      for a in armatures]
+        folders = cast_folders([a.name for a in armatures])
+        # each actor's build fitted as one alone, into its own result folder, by default as for one actor
+        # (docs/measurements.md, "Other people in the room": the duet gains with it); --no-calibrate: none
+        actors = [load_actor_option(argparse.Namespace(**{**vars(args), "armature": list(names),
+                                                          "out": args.out / ACTORS_FOLDER / folder}),
+                                    scene, a, choice.used)
+                  for a, folder in zip(armatures, folders)]
         cast = CastSession(scene, armatures, args.capture, args.out, settings=settings_from_args(args, choice.used),
                            frames=parse_frames(args.frames), resume=args.resume,
                            log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), smooth_hz=args.smooth,

@@ -1,10 +1,11 @@
 """The actor's build by default (issue 43): `track` fits the actor's proportions first on a take of at least 20
-frames unless told --no-calibrate; a shorter take, a resumed take tracked with the rig and several actors keep the
-rig. In Blender, Track does the same with *Fit the Actor's Build* (on by default) and reuses a calibration made on
-the same capture. The calibration itself is replaced by a recorder here: its accuracy is tests/test_actor_ui.py's
-and docs/actor-calibration.md's."""
+frames unless told --no-calibrate; a shorter take and a resumed take tracked with the rig keep the rig; several
+actors are each fitted, with their own saved calibrations and measured lengths. In Blender, Track does the same
+with *Fit the Actor's Build* (on by default) and reuses a calibration made on the same capture. The calibration
+itself is replaced by a recorder here: its accuracy is tests/test_actor_ui.py's and docs/actor-calibration.md's."""
 import argparse
 import importlib
+import re
 from pathlib import Path
 
 import pytest
@@ -28,10 +29,14 @@ def recorded_calibrations(monkeypatch, tmp_path):
     from markerless_mocap.core.actor import actor_file
     from markerless_mocap.operators import actor_calibration
 
-    calls = []
+    class Calls(list):
+        measured = []  # the measured lengths each call was given
 
-    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, **_):
+    calls = Calls()
+
+    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, measured=None, **_):
         calls.append(None if frames is None else list(frames))
+        calls.measured.append(measured)
         return None, Path(out_dir) / "actor.json"
 
     monkeypatch.setattr(actor_calibration, "calibrate_actor", fake_calibrate)
@@ -197,15 +202,45 @@ def test_several_actors_are_each_fitted_by_default_into_their_own_folders(record
 
     monkeypatch.setattr("markerless_mocap.addon.scene_bridge.find_armature", lambda scene, name: Armature(name))
     choice = argparse.Namespace(used="numpy")
-    for extra in ([], ["--no-calibrate"]):
+    saved = tmp_path / "earlier" / "actor.json"
+    for extra in ([], ["--no-calibrate"], ["--actor", f"Lead={saved}", "--calibrate-measured", "Partner:height=1.62",
+                                           "--calibrate-measured", "Partner:forearm=0.25"]):
         args = argparse.ArgumentParser()
         cmd_track.add_arguments(args)
         args = args.parse_args(["--capture", str(duet), "--out", str(tmp_path / "o"), *extra])
         assert cmd_track.run_cast(args, None, ["Lead", "Partner"], choice) == 2
     out = tmp_path / "o" / "actors"
     assert given == [[{"loaded": str(out / "Lead" / "actor.json")}, {"loaded": str(out / "Partner" / "actor.json")}],
-                     None]
-    assert recorded_calibrations == [None, None]  # each on the take's first 20 frames
+                     [None, None], [{"loaded": str(saved)}, {"loaded": str(out / "Partner" / "actor.json")}]]
+    assert recorded_calibrations == [None, None, None]  # each on the take's first 20 frames; Lead's saved one reused
+    # each actor's tape measure reaches its own fit only
+    assert recorded_calibrations.measured == [{}, {}, {"height": 1.62, "forearm": 0.25}]
+
+
+def test_several_actors_say_whose_saved_calibration_and_measured_lengths_they_give(tmp_path):
+    """With several armatures --actor and --calibrate-measured name their actor (Partner=FILE, Partner:height=1.62);
+    with one the name may be left out; a value that names no armature, or two files for one actor, are refused."""
+    from markerless_mocap.core.errors import InputError
+    from markerless_mocap.operators.actor_options import options_of
+
+    two = ["--armature", "Lead", "--armature", "Partner"]
+    args = _args(tmp_path, *two, "--actor", "Partner=a=b.json", "--calibrate-measured", "Lead:height=1.7",
+                 "--calibrate-measured", "Lead:forearm=0.25", "--calibrate-measured", "Partner:shin=0.4")
+    assert options_of(args, "Lead") == (None, ["height=1.7", "forearm=0.25"])
+    assert options_of(args, "Partner") == (Path("a=b.json"), ["shin=0.4"])
+    # one armature: as before, and its own name as the prefix is understood
+    assert options_of(_args(tmp_path, "--actor", "x.json"), None) == (Path("x.json"), [])
+    one = _args(tmp_path, "--armature", "Lead", "--calibrate-measured", "Lead:height=1.7",
+                "--calibrate-measured", "neck=0.1")
+    assert options_of(one, "Lead") == (None, ["height=1.7", "neck=0.1"])
+    for bad, said in ((["--calibrate-measured", "height=1.7"], "say whose it is, as in --calibrate-measured Partner:"),
+                      (["--calibrate-measured", "Nobody:height=1.7"], "(armatures: Lead, Partner)"),
+                      (["--actor", "x.json"], "say whose it is, as in --actor Partner="),
+                      (["--actor", "Lead=x.json", "--actor", "Lead=y.json"], "2 saved calibrations for Lead")):
+        with pytest.raises(InputError, match=re.escape(said)):
+            options_of(_args(tmp_path, *two, *bad), "Lead")
+    with pytest.raises(InputError, match="2 saved calibrations for the actor"):
+        options_of(_args(tmp_path, "--actor", "x.json", "--actor", "y.json"), None)
 
 
 @pytest.mark.bpy
@@ -221,8 +256,8 @@ def test_track_every_armature_in_blender_fits_each_actor_first_and_reuses_the_fi
     bpy.ops.wm.open_mainfile(filepath=str(duet / "subject.blend"))
     calls, given = [], []
 
-    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, **_):
-        calls.append((armature.name, Path(out_dir).name, list(frames)))
+    def fake_calibrate(scene, armature, capture_dir, out_dir, settings=None, frames=None, measured=None, **_):
+        calls.append((armature.name, Path(out_dir).name, list(frames), measured))
         body = mod("addon.scene_bridge").body_from_blender(armature, None, scene)
         fit = _fit(body, mod("core.actor.proportions"), mod("core.actor.landmark_fit"))
         Path(out_dir).mkdir(parents=True, exist_ok=True)
@@ -241,10 +276,22 @@ def test_track_every_armature_in_blender_fits_each_actor_first_and_reuses_the_fi
     m.every_armature = True
     m.capture_dir, m.output_dir = str(duet), str(tmp_path / "out")
     m.use_frame_range, m.frame_start, m.frame_end, m.calibrate_frames = True, 0, 29, 20
+    # each actor's tape measure on its own armature, shown under its name in the Subject panel
+    from test_addon_ui import _draw_all, _labels
+
+    partner = bpy.context.scene.objects["Partner"].mocap_measured
+    partner.actor_height = 2.9  # a typo: named with its actor, nothing fitted
+    with pytest.raises(RuntimeError, match="Partner: Measured Height: "):
+        bpy.ops.mocap.track()
+    partner.actor_height = 1.62
+    m.subject_checked = True
+    labels = _labels(_draw_all(bpy, panels=("MOCAP_PT_subject",)))
+    assert "Lead: Measured Lengths" in labels and "Partner: Measured Lengths (1 set)" in labels, labels
     for _ in range(2):
         with pytest.raises(RuntimeError, match="stop here"):
             bpy.ops.mocap.track()
-    assert calls == [("Lead", "Lead", list(range(20))), ("Partner", "Partner", list(range(20)))]  # fitted once
+    assert calls == [("Lead", "Lead", list(range(20)), {}),  # fitted once, each with its own measurements
+                     ("Partner", "Partner", list(range(20)), {"height": pytest.approx(1.62)})]
     assert len(given) == 2 and all(len(a) == 2 and all(x["height_m"] > 0 for x in a) for a in given)
     assert not m.use_actor  # one actor's 'Track with Calibration' is left alone
     m.fit_actor_build = False

@@ -169,7 +169,8 @@ def test_track_with_two_armatures_keys_each_on_its_own_person(tmp_path, capsys):
     assert "Partner: landmarks left out: cam3 on frames" in said, said[-2000:]
 
 
-def test_several_actors_refuse_one_actors_calibration_and_names_that_share_a_folder(tmp_path, capsys):
+
+def test_several_actors_ask_whose_measurement_and_refuse_names_that_share_a_folder(tmp_path, capsys):
     pytest.importorskip("bpy")
     from scene_helpers import scene_dir
 
@@ -180,8 +181,8 @@ def test_several_actors_refuse_one_actors_calibration_and_names_that_share_a_fol
     code = main(["track", "--scene", str(duet / "subject.blend"), "--capture", str(duet), "--out",
                  str(tmp_path / "o"), "--frames", "0-2", "--armature", "Lead", "--armature", "Partner",
                  "--calibrate-measured", "height=1.7"])
-    assert code == 2
-    assert "--actor and --calibrate-measured are one actor's" in capsys.readouterr().err
+    assert code == 2  # whose height it is, said before anything is fitted or tracked
+    assert "with several armatures say whose it is, as in --calibrate-measured Partner:" in capsys.readouterr().err
     code = main(["track", "--scene", str(duet / "subject.blend"), "--capture", str(duet), "--out",
                  str(tmp_path / "o"), "--frames", "0-2", "--armature", "Lead", "--armature", "Lead"])
     assert code == 2 and "an armature is given twice (Lead, Lead)" in capsys.readouterr().err

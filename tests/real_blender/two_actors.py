@@ -2,11 +2,12 @@
 `blender duet/subject.blend --python two_actors.py -- CAPTURE OUT` (with `-b`: the operator's synchronous path).
 
 What a user does in the Subject and Track panels for several actors: tick 'Track Every Armature', set the capture
-and output folders and a short frame range, press Track with Fit the Actor's Build on (the default) and 3
-calibration frames: each actor's build is fitted in turn (in the UI the modal calibration, one actor after the
-other), then both are tracked (the modal Track), watched from a timer as the window keeps drawing. Both actors'
-fits must be saved in their result folders (actors/<armature>/actor.json, made on this capture), both armatures
-keyed on every tracked frame, each actor's result folder written, the UI never stalled more than 5 s.
+and output folders and a short frame range, measure one actor's height on its armature, press Track with Fit the
+Actor's Build on (the default) and 3 calibration frames: each actor's build is fitted in turn (in the UI the modal
+calibration, one actor after the other), then both are tracked (the modal Track), watched from a timer as the
+window keeps drawing. Both actors' fits must be saved in their result folders (actors/<armature>/actor.json, made
+on this capture; the measured actor's with its measured height), both armatures keyed on every tracked frame, each
+actor's result folder written, the UI never stalled more than 5 s.
 """
 import json
 import sys
@@ -24,6 +25,9 @@ m.output_dir = out
 m.use_frame_range, m.frame_start, m.frame_end = True, 0, 2
 m.preset = "preview"
 m.fit_actor_build, m.calibrate_frames = True, 3
+MEASURED = {armatures[-1]: 1.62}  # one actor's measured height, on its own armature (Subject panel, under its name)
+for name, height in MEASURED.items():
+    bpy.context.scene.objects[name].mocap_measured.actor_height = height
 state = {"ticks": [], "calibrating_seen": False}
 
 
@@ -38,7 +42,11 @@ def check_and_end(result):
             bpy.context.scene.frame_set(f)
             frames.append([round(v, 4) for v in (arm.matrix_world @ arm.pose.bones["Hips"].matrix).translation])
         fit = Path(out) / "actors" / name / "actor.json"
-        made_on = json.loads(fit.read_text()).get("capture") if fit.is_file() else None
+        saved = json.loads(fit.read_text()) if fit.is_file() else {}
+        made_on = saved.get("capture")
+        if name in MEASURED:  # the measured height is this actor's, not the footage's
+            height = saved.get("height_m")
+            report.setdefault("measured_height_m", {})[name] = None if height is None else round(height, 4)
         report["keys"][name] = {"keyed": arm.animation_data is not None and arm.animation_data.action is not None,
                                 "hips": frames, "folder": (Path(out) / "actors" / name / "joints.npz").is_file(),
                                 "fitted": made_on is not None and Path(made_on).resolve() == Path(capture).resolve()}
@@ -50,13 +58,15 @@ def check_and_end(result):
           and (bpy.app.background or state["calibrating_seen"])
           and all(k["keyed"] and k["folder"] and k["fitted"] for k in report["keys"].values())
           and (Path(out) / "tracked.blend").is_file()
+          and all(abs((report.get("measured_height_m", {}).get(n) or 0) - h) < 1e-3 for n, h in MEASURED.items())
           and (bpy.app.background or (report["max_ui_gap_s"] is not None and report["max_ui_gap_s"] < 5)))
     hips = [report["keys"][n]["hips"][0] for n in armatures]
     apart = sum((a - b) ** 2 for a, b in zip(*hips)) ** 0.5 if len(hips) == 2 else 0.0
     ok = ok and apart > 0.3  # each keyed on its own person, not both on one
     how = "modal, in the UI" if not bpy.app.background else "in the background"
     print(f"STAGE two actors from the Track panel ({how}): {'keyed both' if ok else 'FAILED'} ({', '.join(armatures)}; "
-          f"{m.status!r}; builds fitted: {sum(k['fitted'] for k in report['keys'].values())}; hips {apart:.2f} m apart "
+          f"{m.status!r}; builds fitted: {sum(k['fitted'] for k in report['keys'].values())}, measured heights kept: "
+          f"{report.get('measured_height_m')}; hips {apart:.2f} m apart "
           f"at the first frame; longest UI gap {report['max_ui_gap_s']} s) "
           f"{m.last_error}", flush=True)
     print("STAGE-JSON " + json.dumps(report), flush=True)
