@@ -11,7 +11,9 @@ from .failures import USER_ERRORS, cli_failure
 
 
 def add_arguments(p):
-    p.add_argument("--result", type=Path, required=True, help="result folder (holding joints.npz, poses.npz)")
+    p.add_argument("--result", type=Path, required=True,
+                   help="result folder (holding joints.npz, poses.npz); of several actors: OUT/actors/NAME, or OUT "
+                        "itself with --capture (each actor measured, the sheet draws them all)")
     p.add_argument("--truth", type=Path, help="ground truth joints (gt_joints.npz); without it, the agreement "
                                               "with the learned evidence is measured (needs --capture)")
     p.add_argument("--capture", type=Path, help="the capture folder the result was tracked on (with --truth: also "
@@ -78,13 +80,35 @@ def _load_result(result_dir):
         raise EvaluationError(f"{path} is not the poses.npz of a result folder ({exc})") from exc
 
 
-def _subject(args):
+def cast_actors(result_dir):
+    """[(armature name, its result folder)] when `result_dir` holds several actors (its report.json lists them,
+    docs/several-actors.md), else None."""
+    report = Path(result_dir) / "report.json"
+    if (Path(result_dir) / "poses.npz").is_file() or not report.is_file():
+        return None
+    try:
+        actors = json.loads(report.read_text()).get("actors")
+    except (ValueError, AttributeError):
+        return None
+    return [(a["armature"], Path(result_dir) / a["folder"]) for a in actors] if actors else None
+
+
+def _tracked_armature(result_dir):
+    """The armature a result folder was tracked on (report.json), None when it does not say."""
+    try:
+        return json.loads((Path(result_dir) / "report.json").read_text()).get("armature")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _subject(args, result_dir):
     from ..addon.scene_bridge import body_from_blender, find_armature
     from .cmd_track import open_subject
 
     scene = open_subject(args.scene or args.capture / "subject.blend")
-    body = body_from_blender(find_armature(scene), None, scene)
-    actor_file = Path(args.result) / "actor.json"
+    # the result's own armature: a scene of several actors has one per actor
+    body = body_from_blender(find_armature(scene, _tracked_armature(result_dir)), None, scene)
+    actor_file = Path(result_dir) / "actor.json"
     if actor_file.is_file():  # tracked with an actor calibration: the poses are the actor body's
         from ..core.actor.actor_file import actor_body, load_actor
 
@@ -92,7 +116,7 @@ def _subject(args):
     return body
 
 
-def _agreement(args, body, capture, proxy, frames, poses):
+def _agreement(result_dir, body, capture, proxy, frames, poses):
     from ..core.evidence.agreement import result_agreement, summarise_agreement
     from ..core.evidence.learned import LandmarkModel
     from ..core.evidence.keypoints import rig_keypoints
@@ -105,31 +129,39 @@ def _agreement(args, body, capture, proxy, frames, poses):
     print("|---|---|---|---|")
     for name, s in summary.items():
         print(f"| {name} | {s['coverage']:.3f} | {s['iou']:.3f} | {s['keypoint_px']:.1f} |")
-    print(json.dumps({"result": str(args.result), "frames": len(frames), "agreement": summary}))
+    print(json.dumps({"result": str(result_dir), "frames": len(frames), "agreement": summary}))
 
 
-def _sheet(args, body, capture, proxy, frames, poses):
+def _sheet(args, capture, actors):
+    """The contact sheet: every `actors` entry (body, proxy, frames, poses, result folder) drawn over the footage
+    with its landmarks, each actor in its own colours, on the first actor's frames."""
     import cv2
 
-    from ..core.results.overlay import contact_sheet, draw_body, draw_landmarks, part_colours
+    from ..core.results.overlay import actor_colours, contact_sheet, draw_body, draw_landmarks, part_colours
 
-    landmarks = {}
-    path = Path(args.result) / "keypoints.npz"
-    if path.is_file():
-        with np.load(path) as d:
-            landmarks = {int(f): (uv, vis) for f, uv, vis in zip(d["frames"], d["uv"], d["visibility"])}
-    colours = part_colours(len(proxy.part_names))
+    landmarks, posed = [], []
+    for _body, _proxy, frames, poses, result_dir in actors:
+        landmarks.append({})
+        path = Path(result_dir) / "keypoints.npz"
+        if path.is_file():
+            with np.load(path) as d:
+                landmarks[-1] = {int(f): (uv, vis) for f, uv, vis in zip(d["frames"], d["uv"], d["visibility"])}
+        posed.append(dict(zip((int(f) for f in frames), poses)))
+    parts = max(len(a[1].part_names) for a in actors)
+    colours = [part_colours(parts)] if len(actors) == 1 else actor_colours(len(actors), parts)
     rows, labels = [], []
-    for frame, pose in list(zip(frames, poses))[::max(1, args.every)]:
-        images = capture.frames.read(int(frame))
-        vertices = proxy.deform(body, pose[None])[0]
-        cells = []
-        for c, cam in enumerate(capture.cameras):
-            img = draw_body(images[cam.name], cam, vertices, proxy.faces, proxy.face_part, colours)
-            if int(frame) in landmarks:
-                uv, vis = landmarks[int(frame)]
-                draw_landmarks(img, uv[c], vis[c])
-            cells.append(img)
+    for frame in [int(f) for f in actors[0][2]][::max(1, args.every)]:
+        images = capture.frames.read(frame)
+        cells = [images[cam.name] for cam in capture.cameras]
+        for (body, proxy, *_), poses, marks, colour in zip(actors, posed, landmarks, colours):
+            if frame not in poses:
+                continue
+            vertices = proxy.deform(body, poses[frame][None])[0]
+            for c, cam in enumerate(capture.cameras):
+                cells[c] = draw_body(cells[c], cam, vertices, proxy.faces, proxy.face_part, colour)
+                if frame in marks:
+                    uv, vis = marks[frame]
+                    draw_landmarks(cells[c], uv[c], vis[c])
         rows.append(cells)
         labels.append(f"frame {frame}")
     args.sheet.parent.mkdir(parents=True, exist_ok=True)
@@ -139,6 +171,12 @@ def _sheet(args, body, capture, proxy, frames, poses):
 
 def run(args):
     try:
+        cast = cast_actors(args.result)
+        if cast and args.truth is not None:  # a truth file is one person's
+            names = ", ".join(name for name, _ in cast)
+            raise EvaluationError(f"{args.result} holds several actors ({names}): give one actor's folder with its "
+                                  f"truth, --result {Path(args.result) / 'actors' / cast[0][0]} (the sample scenes "
+                                  "keep gt_joints_<armature>.npz)")
         if args.truth is not None:
             _print_truth(args)
             if args.capture is not None:
@@ -150,14 +188,19 @@ def run(args):
             from ..core.capture.capture import load_capture
             from ..core.body.proxy import make_proxy
 
-            body = _subject(args)
             capture = load_capture(args.capture)
-            proxy = make_proxy(body)
-            frames, poses = _load_result(args.result)
-            if args.truth is None:
-                _agreement(args, body, capture, proxy, frames, poses)
+            actors = []
+            for name, result_dir in cast or [(None, Path(args.result))]:
+                body = _subject(args, result_dir)
+                proxy = make_proxy(body)
+                frames, poses = _load_result(result_dir)
+                if args.truth is None:
+                    if name is not None:
+                        print(f"{name} ({result_dir}):")
+                    _agreement(result_dir, body, capture, proxy, frames, poses)
+                actors.append((body, proxy, frames, poses, result_dir))
             if args.sheet is not None:
-                _sheet(args, body, capture, proxy, frames, poses)
+                _sheet(args, capture, actors)
     except USER_ERRORS as exc:  # EvaluationError, a capture or file that cannot be read: the user's to fix
         return cli_failure("evaluate", exc)
     return 0

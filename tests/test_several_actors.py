@@ -167,7 +167,20 @@ def test_track_with_two_armatures_keys_each_on_its_own_person(tmp_path, capsys):
     assert max(off) < 0.15, dict(zip(legs, np.round(off, 3)))
     said = printed.out + printed.err
     assert "Partner: landmarks left out: cam3 on frames" in said, said[-2000:]
+    # `evaluate` on the whole result without ground truth (real footage): each actor against the evidence around its
+    # own pose, on its own armature; both drawn on one contact sheet; a truth file, one person's, asks for an actor
+    code = main(["evaluate", "--result", str(out), "--capture", str(duet), "--sheet", str(tmp_path / "sheet.png"),
+                 "--every", "12"])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    agreement = [json.loads(line) for line in printed.out.splitlines() if line.startswith("{")]
+    assert [a["result"].rsplit("/", 1)[-1] for a in agreement] == ["Lead", "Partner"], printed.out
+    assert all(a["frames"] == 13 and a["agreement"]["all"]["iou"] > 0.6 for a in agreement), agreement
+    import cv2
 
+    assert cv2.imread(str(tmp_path / "sheet.png")).shape[0] > 0
+    assert main(["evaluate", "--result", str(out), "--truth", str(duet / "gt_joints_Lead.npz")]) == 2
+    assert f"give one actor's folder with its truth, --result {out / 'actors' / 'Lead'}" in capsys.readouterr().err
 
 
 def test_several_actors_ask_whose_measurement_and_refuse_names_that_share_a_folder(tmp_path, capsys):
