@@ -182,19 +182,27 @@ def check_rigs(takes):
 
     checked = {}
     for take in takes:
-        key = (str(take.scene.resolve()), take.armature)
-        if key not in checked:
+        for name in take.armatures or [take.armature]:
+            key = (str(take.scene.resolve()), name)
+            if key not in checked:
+                try:
+                    scene = open_subject(take.scene)
+                    armature = find_armature(scene, name)
+                    body_from_blender(armature, None, scene)
+                    checked[key] = None
+                except USER_ERRORS as exc:
+                    checked[key] = str(exc)
+                except SystemExit as exc:
+                    checked[key] = str(exc)
+            if checked[key] is not None:
+                raise TakeListError(f"take {take.name!r}: subject {take.scene}: {checked[key]}")
+        if take.several:
+            from .cast_session import CastError, cast_folders
+
             try:
-                scene = open_subject(take.scene)
-                armature = find_armature(scene, take.armature)
-                body_from_blender(armature, None, scene)
-                checked[key] = None
-            except USER_ERRORS as exc:
-                checked[key] = str(exc)
-            except SystemExit as exc:
-                checked[key] = str(exc)
-        if checked[key] is not None:
-            raise TakeListError(f"take {take.name!r}: subject {take.scene}: {checked[key]}")
+                cast_folders(list(take.armatures))
+            except CastError as exc:
+                raise TakeListError(f"take {take.name!r}: {exc}") from None
 
 
 class TakeRun:
@@ -304,8 +312,16 @@ class Batch:
                                                          check=False)
 
     def run(self, runner):
+        from .batch_cast import CastRun, finish_cast, poll_cast, submit_cast
+
         for run in self.runs:
             if run.state == "failed":  # before anything ran (its actor calibration)
+                continue
+            if isinstance(run, CastRun):
+                if run.finished:  # by the same command in an earlier run of the batch
+                    finish_cast(run, self.args.out)
+                else:
+                    submit_cast(runner, run)
                 continue
             later = [f for f in run.folders[1:] if not f.done]
             if later and not run.seeds.is_file():  # the chunks after the first start where the seed pass says
@@ -317,6 +333,9 @@ class Batch:
                 self.cancel()
                 return EXIT_CANCELLED
             for run in self.runs:
+                if isinstance(run, CastRun):
+                    poll_cast(runner, run, self.args.out)
+                    continue
                 self._poll_seeds(runner, run)
                 self._poll_chunks(runner, run)
             self._poll_stitches()
@@ -506,7 +525,7 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
 
     pending = {}
     for take in takes:
-        if take.actor is not None or take.calibrate is False:
+        if take.actor is not None or take.calibrate is False or take.several:  # a cast's `track` fits each actor
             continue
         if take.calibrate is None and take.n_frames < DEFAULT_FRAMES:
             continue
@@ -553,6 +572,17 @@ def _keep_in_result(take, out):
     write_actor(out / take.name / "actor.json", load_actor(take.actor))
 
 
+def cast_run(batch, take, chunks_root):
+    """The batch's run of a take of several actors: its work folder keyed by what decides the poses."""
+    from ..core.batch.chunk_folder import chunk_key
+    from .batch_cast import CastRun, cast_argv, cast_work_folder
+
+    key = chunk_key(take.settings().to_dict(), take.scene, list(take.armatures), {"calibrate": take.calibrate},
+                    take.capture)
+    work = cast_work_folder(chunks_root, take, key)
+    return CastRun(take, work, cast_argv(batch.worker_command, take, work, batch.mapped, batch.args))
+
+
 def _choices_of(args):
     return {name: getattr(args, name) for name in CHOICE_NAMES if getattr(args, name) is not None}
 
@@ -585,6 +615,8 @@ def run(args):
                 take.calibrate = take.calibrate or False  # an explicit `calibrate = true` stands
         plans = {}
         for take in takes:  # every take's plan checked before anything runs
+            if take.several:  # tracked whole (operators/batch_cast.py)
+                continue
             try:
                 plans[take.name] = plan_chunks(take.frames[0], take.frames[1], args.chunk_frames, args.warmup,
                                                args.overlap)
@@ -610,6 +642,9 @@ def run(args):
                 batch.cancel()
                 return EXIT_CANCELLED
             for take in takes:
+                if take.several:
+                    batch.runs.append(cast_run(batch, take, chunks_root))
+                    continue
                 plan = plans[take.name]
                 actor = load_actor(take.actor) if take.actor is not None else None
                 key = chunk_key(take.settings().to_dict(), take.scene, take.armature, actor, take.capture)

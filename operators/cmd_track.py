@@ -1,5 +1,6 @@
 """`track`: track a capture with the rigged subject of a .blend and write the result folder."""
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -9,6 +10,7 @@ from ..core.results.views_without_landmarks import views_without_landmarks_messa
 from ..core.tracking.foot_contact import CONTACT_SPEED
 from ..core.tracking.options import OPTIONS, settings_from_choices
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
+from .failures import EXIT_PARENT_GONE
 
 ALGORITHMS = OPTIONS["algorithm"].values
 LIKELIHOOD_NAMES = OPTIONS["likelihood"].values
@@ -59,6 +61,9 @@ def add_arguments(p):
                    help="armature to track if the scene has several; repeat it to track several actors at once, "
                         "each placed roughly at its person (results in OUT/actors/NAME/)")
     p.add_argument("--resume", action="store_true", help="continue after the last solved frame in --out")
+    p.add_argument("--stop-with-parent", action="store_true",
+                   help=f"stop (exit {EXIT_PARENT_GONE}, the frames solved kept for --resume) when the process that "
+                        "started this one ends (a batch worker killed mid-take: the take is run again elsewhere)")
     p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
     p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
     actor = p.add_mutually_exclusive_group()
@@ -144,9 +149,26 @@ def open_subject(scene_path):
     return bpy.context.scene
 
 
-def run_session(session, progress=None, log=print):
+class ParentGone(Exception):
+    """The process that started this one has ended (--stop-with-parent)."""
+
+
+def parent_watch():
+    """A check that raises ParentGone once this process's parent has changed (it ended: the process was
+    re-parented)."""
+    parent = os.getppid()
+
+    def check():
+        if os.getppid() != parent:
+            raise ParentGone
+    return check
+
+
+def run_session(session, progress=None, log=print, before_frame=None):
     progress = progress or Progress(session.n_total, session.n_done)
     while True:
+        if before_frame is not None:
+            before_frame()
         est = session.solve_next()
         if est is None:
             break
@@ -244,7 +266,7 @@ def run(args):
     session.writer.info["backend"] = choice.to_dict()  # report.json: what was asked for, what ran, why
     if args.resume:
         session.key_all()
-    code = solve_all(session, args.out)
+    code = solve_all(session, args.out, args.stop_with_parent)
     if code is not None:
         return code
     if choice.used == "gpu":  # its private render scene must not be saved in tracked.blend
@@ -257,14 +279,18 @@ def run(args):
     return 0
 
 
-def solve_all(session, out):
+def solve_all(session, out, stop_with_parent=False):
     """run_session with the command line's endings: None once every frame is solved, else the exit code, said
     with where the frames solved so far are kept (a TrackSession or a CastSession)."""
     from ..core.results.result_folder import ResultWriteError
     from .failures import cli_failure
 
     try:
-        run_session(session)
+        run_session(session, before_frame=parent_watch() if stop_with_parent else None)
+    except ParentGone:
+        print(f"markerless_mocap track: the process that started this one has ended; stopping with {session.n_done} "
+              f"frames solved and saved in {out} (run again with --resume)", file=sys.stderr)
+        return EXIT_PARENT_GONE
     except KeyboardInterrupt:
         print(f"interrupted: {session.n_done} frames solved and saved in {out} (use --resume to continue)",
               file=sys.stderr)
@@ -306,7 +332,7 @@ def run_cast(args, scene, names, choice):
         session.writer.info["backend"] = choice.to_dict()
     if args.resume:
         cast.key_all()
-    code = solve_all(cast, args.out)
+    code = solve_all(cast, args.out, args.stop_with_parent)
     if code is not None:
         return code
     written = cast.finish(export=not args.no_export, overlays=not args.no_overlays, save_blend=not args.no_export)

@@ -10,8 +10,8 @@ import sys
 from pathlib import Path
 
 from .cmd_track import StepPrinter, add_tracking_options, open_subject, parse_frames, settings_from_args
+from .failures import EXIT_PARENT_GONE
 
-EXIT_PARENT_GONE = 75  # sysexits' EX_TEMPFAIL: the process that started the chunk is gone; run it again
 
 
 def add_take_arguments(p, frames_help):

@@ -12,6 +12,7 @@ from ..core.errors import InputError
 
 EXIT_INPUT = 2
 EXIT_BUG = 70  # sysexits' EX_SOFTWARE: a script can tell a bug from a set-up mistake (2) and an interrupt (130)
+EXIT_PARENT_GONE = 75  # sysexits' EX_TEMPFAIL: the batch worker that started the command is gone; run it again
 USER_ERRORS = (InputError, OSError)
 
 

@@ -34,6 +34,13 @@ def test_a_good_list_with_defaults_and_relative_paths(tmp_path):
     assert (s1.particles, s1.iterations, s1.seed, s2.seed) == (20, 4, 3, 4)  # line > [defaults] > command line
 
 
+def test_a_take_of_several_actors_lists_their_armatures(tmp_path):
+    one, two = read_take_list(_toml(tmp_path, _take("one", armature=["Lead"], frames="0-29")
+                                    + _take("two", armature=["Lead", "Partner"], frames="30-59")))
+    assert (one.armature, one.armatures, one.several) == ("Lead", (), False)
+    assert (two.armature, two.armatures, two.several) == (None, ("Lead", "Partner"), True)
+
+
 def test_every_frame_by_default(tmp_path):
     (take,) = read_take_list(_toml(tmp_path, _take()))
     assert take.frames == (0, 59)
@@ -54,6 +61,10 @@ def test_every_frame_by_default(tmp_path):
     ('[[take]]\nname = "a"\nscene = "x.blend"\n', "take 'a': needs a capture"),
     ("[take]\nname = 1\n", "takes must be \\[\\[take\\]\\] tables"),
     ("[takes]\n", "unknown takes"),
+    (_take("a", armature=["Lead", "Lead"]), "take 'a': armature \\['Lead', 'Lead'\\]: a name given twice"),
+    (_take("a", armature=[]), "take 'a': armature must be the armature object's name \\(text\\), or a list"),
+    (_take("a", armature=["Lead", "Partner"], actor="x.json"), "take 'a': actor is one actor's calibration, but "
+                                                               "the take tracks Lead, Partner"),
 ])
 def test_bad_inputs_name_the_take(tmp_path, text, words):
     with pytest.raises(TakeListError, match=words):

@@ -6,7 +6,8 @@
     scene = "subjects/anna.blend"   the subject; relative paths are relative to the TOML file's folder
     capture = "captures/walk01"
     frames = "0-599"                optional: "A-B" inclusive or [A, B]; default every frame
-    armature = "Armature"           optional
+    armature = "Armature"           optional; a list (["Lead", "Partner"]) tracks several actors at once: the take
+                                    runs whole on one worker (`track` with each --armature), not in chunks
     actor = "anna/actor.json"       optional: an actor calibration to track with
     calibrate = false               optional: track with the rig's proportions; by default a take of at least
                                     20 frames without `actor` is tracked with the actor's, fitted on its first frames
@@ -42,12 +43,17 @@ class Take:
     scene: Path
     capture: Path
     frames: tuple  # (first, last) inclusive
-    armature: str | None = None
+    armature: str | None = None  # the one armature tracked (None: the scene's only one)
     actor: Path | None = None
     choices: dict = field(default_factory=dict)  # tracking options (CHOICE_NAMES) given for this take
     # fit the actor's proportions first (operators/cmd_batch.py; then `actor` is that fit): True, False, or None for
     # the default (fitted on a take long enough for it, as `track` does)
     calibrate: bool | None = None
+    armatures: tuple = ()  # several actors tracked at once (then `armature` is None)
+
+    @property
+    def several(self):
+        return len(self.armatures) > 1
 
     def settings(self):
         return settings_from_choices(self.choices)
@@ -200,9 +206,10 @@ def _takes_of_file(path, defaults, scene):
         for key in ("capture",) + (() if scene is not None else ("scene",)):
             if key not in entry:
                 raise TakeListError(f"{where}: needs a {key}")
-        armature = entry.get("armature")
-        if armature is not None and not isinstance(armature, str):
-            raise TakeListError(f"{where}: armature must be the armature object's name (text)")
+        armature, armatures = _armatures(entry.get("armature"), where)
+        if armatures and "actor" in entry:
+            raise TakeListError(f"{where}: actor is one actor's calibration, but the take tracks "
+                                f"{', '.join(armatures)}: leave actor out (each actor's build is fitted on the take)")
         calibrate = entry.get("calibrate")
         if calibrate is not None and not isinstance(calibrate, bool):
             raise TakeListError(f"{where}: calibrate must be true or false")
@@ -214,8 +221,20 @@ def _takes_of_file(path, defaults, scene):
             _path(entry["capture"], base, where, "capture"),
             _parse_frames(entry["frames"], where) if "frames" in entry else None, armature,
             _path(entry["actor"], base, where, "actor") if "actor" in entry else None,
-            {**defaults, **_choices(entry, where)}, calibrate))
+            {**defaults, **_choices(entry, where)}, calibrate, armatures))
     return takes
+
+
+def _armatures(value, where):
+    """(armature, armatures) of a take's `armature`: a name, or a list of names (several actors, each once)."""
+    if value is None or isinstance(value, str):
+        return value, ()
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v for v in value):
+        raise TakeListError(f"{where}: armature must be the armature object's name (text), or a list of names for "
+                            "several actors")
+    if len(set(value)) != len(value):
+        raise TakeListError(f"{where}: armature {value}: a name given twice (name each actor's armature once)")
+    return (value[0], ()) if len(value) == 1 else (None, tuple(value))
 
 
 def _is_capture(folder):
