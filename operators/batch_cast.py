@@ -87,6 +87,8 @@ def cast_argv(command, take, work, mapped, args):
         argv += ["--armature", name]
     if take.calibrate is not None:
         argv.append("--calibrate" if take.calibrate else "--no-calibrate")
+    for length in take.measured:  # each names its actor (core/batch/takes.py)
+        argv += ["--calibrate-measured", length]
     argv += option_args(take.choices) + ["--smooth", str(args.smooth)] + foot_lock_args(args.foot_lock,
                                                                                        args.foot_lock_speed)
     return argv + (["--no-export"] if args.no_export else []) + (["--no-overlays"] if args.no_overlays else [])

@@ -538,6 +538,8 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
         argv = [*command, "calibrate", "--scene", mapped(take.scene), "--capture", mapped(take.capture),
                 "--out", mapped(shared), "--frames", f"{first}-{last}"]
         argv += (["--armature", take.armature] if take.armature else []) + option_args(take.choices)
+        for length in one_actors_measured(take):
+            argv += ["--measured", length]
         print(f"batch: take {take.name!r}: calibrating the actor on frames {first}-{last}", file=sys.stderr,
               flush=True)
         pending[take.name] = (take, runner.submit(f"{take.name}-calibrate", argv, check=False))
@@ -564,6 +566,17 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
     return failed
 
 
+def one_actors_measured(take):
+    """A one-actor take's measured lengths as `calibrate --measured` takes them (SEGMENT=METRES, its armature's
+    name, if written before, left out)."""
+    from types import SimpleNamespace
+
+    from ..core.actor.per_actor import options_of
+
+    names = [take.armature] if take.armature else []
+    return options_of(SimpleNamespace(armature=names, calibrate_measured=list(take.measured)), take.armature)[1]
+
+
 def _keep_in_result(take, out):
     """DIR/<take>/actor.json: the fit beside the take's result, where Blender's Track reads it to key the take."""
     from ..core.actor.actor_file import load_actor, write_actor
@@ -577,8 +590,8 @@ def cast_run(batch, take, chunks_root):
     from ..core.batch.chunk_folder import chunk_key
     from .batch_cast import CastRun, cast_argv, cast_work_folder
 
-    key = chunk_key(take.settings().to_dict(), take.scene, list(take.armatures), {"calibrate": take.calibrate},
-                    take.capture)
+    key = chunk_key(take.settings().to_dict(), take.scene, list(take.armatures),
+                    {"calibrate": take.calibrate, "measured": list(take.measured)}, take.capture)
     work = cast_work_folder(chunks_root, take, key)
     return CastRun(take, work, cast_argv(batch.worker_command, take, work, batch.mapped, batch.args))
 
@@ -593,7 +606,7 @@ def run(args):
     from ..core.batch.cluster import ChunkRunner, chunk_environment
     from ..core.batch.plan import plan_chunks
     from ..core.batch.seed import seeds_path
-    from ..core.batch.takes import read_take_list
+    from ..core.batch.takes import TakeListError, read_take_list
     from .failures import USER_ERRORS, cli_failure
 
     out = args.out
@@ -613,6 +626,10 @@ def run(args):
         if args.no_calibrate:
             for take in takes:
                 take.calibrate = take.calibrate or False  # an explicit `calibrate = true` stands
+                if take.measured and take.calibrate is False:
+                    raise TakeListError(f"take {take.name!r}: measured lengths are for fitting the actor, but "
+                                        "--no-calibrate tracks it with the rig: give it `calibrate = true`, or leave "
+                                        "its measured lengths out")
         plans = {}
         for take in takes:  # every take's plan checked before anything runs
             if take.several:  # tracked whole (operators/batch_cast.py)

@@ -184,7 +184,7 @@ def load_actor_option(args, scene, armature, backend=None):
     from ..core.actor.actor_file import load_actor
     from ..core.actor.measured_lengths import parse_measured
     from ..core.errors import InputError
-    from .actor_options import options_of
+    from ..core.actor.per_actor import options_of
 
     asked = getattr(args, "calibrate", None)  # True: --calibrate, False: --no-calibrate, None: the default
     saved, measured_items = options_of(args, getattr(armature, "name", None))

@@ -375,13 +375,6 @@ class MOCAP_OT_track(bpy.types.Operator):
         if context.scene.mocap.run_on != "this":  # chunks on local processes or a cluster: track_batch.py
             from .track_batch import start
 
-            from .setup_subject import several_actors
-
-            if several_actors(context):
-                context.scene.mocap.last_error = ("Several actors run on this Blender only: set 'Run on' to This "
-                                                  "Blender, or untick 'Track Every Armature'")
-                self.report({"ERROR"}, context.scene.mocap.last_error)
-                return {"CANCELLED"}
             return start(self, context)
         if not self._calibrate_first_here(context):
             return {"CANCELLED"}

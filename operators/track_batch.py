@@ -39,6 +39,7 @@ class BatchRun:
     frame_offset: int  # scene frame of capture frame 0 (as TrackSession's)
     actor: dict = None  # the actor calibration tracked with, if any
     started: float = field(default_factory=time.time)
+    cast: tuple = ()  # several actors' armature names (Track Every Armature): each keyed from actors/<name>/
 
     @property
     def keyed_take(self):
@@ -97,14 +98,33 @@ def worker_command():
     return [sys.executable, "-m", CLI_NAME]
 
 
-def plan_takes(context, out_dir, armature):
-    """The [[take]] tables to send: this scene's capture (its frame range), or every capture of the folder."""
+def _measured_lengths(props, armatures):
+    """The lengths measured on the actors (the Subject panel's for one, each armature's for several) as the take
+    list's `measured` texts (core/batch/takes.py)."""
+    from .calibrate import measured_lengths_for
+
+    several = len(armatures) > 1
+    out = []
+    for armature, lengths in zip(armatures, measured_lengths_for(props, [(a, None) for a in armatures])):
+        out += [f"{armature.name}:{name}={metres:g}" if several else f"{name}={metres:g}"
+                for name, metres in lengths.items()]
+    return out
+
+
+def plan_takes(context, out_dir, armatures):
+    """The [[take]] tables to send: this scene's capture (its frame range), or every capture of the folder;
+    `armatures`: the one tracked, or several actors' (one take of them all)."""
     props = context.scene.mocap
-    common = {"armature": armature.name}
+    common = {"armature": armatures[0].name if len(armatures) == 1 else [a.name for a in armatures]}
     if props.use_actor and props.actor_file:
+        if len(armatures) > 1:
+            raise BatchSetupError("An actor calibration applies to one actor: untick 'Track with Calibration' to "
+                                  "track every armature, or untick 'Track Every Armature'")
         common["actor"] = bpy.path.abspath(props.actor_file)
     elif not props.fit_actor_build:
         common["calibrate"] = False  # else the batch fits each take's actor first, as Track does here
+    else:
+        common["measured"] = _measured_lengths(props, armatures) or None  # for that fit
     if props.batch_scope == "folder":
         if not props.batch_folder:
             raise BatchSetupError("No captures folder: set it under Run On in Mocap > Track (each sub-folder with a "
@@ -144,7 +164,7 @@ def start(operator, context):
     from .cmd_batch import launch_batch
     from .cmd_track import foot_lock_args
     from .failures import user_message
-    from .setup_subject import subject_armature
+    from .setup_subject import several_actors, subject_armature
     from .track import output_folder
 
     scene = context.scene
@@ -154,10 +174,10 @@ def start(operator, context):
         if props.run_on == "cluster" and not props.scheduler_address.strip():
             raise BatchSetupError("No scheduler address: set it under Run On in Mocap > Track (e.g. "
                                   "tcp://render01:8786), or run on local processes")
-        armature = subject_armature(context)
+        armatures = several_actors(context) or [subject_armature(context)]
         out_dir = output_folder(context)
         out_dir.mkdir(parents=True, exist_ok=True)
-        takes = plan_takes(context, out_dir, armature)
+        takes = plan_takes(context, out_dir, armatures)
         actor = None
         if "actor" in takes[0]:
             from ..core.actor.actor_file import load_actor
@@ -175,7 +195,9 @@ def start(operator, context):
         props.last_error = user_message(exc, "Sending the take")
         operator.report({"ERROR"}, props.last_error)
         return {"CANCELLED"}
-    run = BatchRun(scene.name, armature.name, out_dir, process, [t["name"] for t in takes], scene.frame_start, actor)
+    cast = tuple(a.name for a in armatures) if len(armatures) > 1 else ()
+    run = BatchRun(scene.name, armatures[0].name, out_dir, process, [t["name"] for t in takes], scene.frame_start,
+                   actor, cast=cast)
     _RUNS[scene.name] = run
     props.is_tracking = True
     props.batch_dir = str(out_dir)
@@ -285,12 +307,8 @@ def finish(scene, run, progress):
         props.status = f"{len(takes) - len(failed)} of {len(takes)} take(s) tracked; none keyed here"
         return False
     result = Path(keyed.get("result") or run.out_dir / run.keyed_take)
-    armature = bpy.data.objects.get(run.armature_name)
     try:
-        if armature is None or armature.name not in scene.objects:
-            raise ResultMismatchError(f"armature {run.armature_name!r} is no longer in scene {scene.name!r}: the "
-                                      f"result is in {result}")
-        frames = key_result(scene, armature, result, run.frame_offset, run.actor or _fitted_actor(result))
+        frames = _key_each(scene, run, result)
     except Exception as exc:  # noqa: BLE001  (said in the panel; the result folder stays)
         from .failures import user_message
 
@@ -302,7 +320,8 @@ def finish(scene, run, progress):
     props.seconds_per_frame = 0.0
     props.progress = 1.0
     took = _duration(time.time() - run.started)
-    props.status = f"Tracked {len(frames)} frames in {props.chunks_total} chunks in {took}, keyed; results in {result}"
+    chunks = f"{props.chunks_total} chunk{'s' if props.chunks_total != 1 else ''}"
+    props.status = f"Tracked {len(frames)} frames in {chunks} in {took}, keyed; results in {result}"
     from ..core.results.views_without_landmarks import views_without_landmarks_in_result
 
     said = views_without_landmarks_in_result(result)
@@ -311,6 +330,21 @@ def finish(scene, run, progress):
     if failed:
         props.last_error = "; ".join(failed)
     return True
+
+
+def _key_each(scene, run, result):
+    """Key the result on the armature, or each actor's (result/actors/<name>/) on its own; the frames keyed."""
+    from .cast_session import ACTORS_FOLDER, actor_folder_name
+
+    targets = [(name, result / ACTORS_FOLDER / actor_folder_name(name)) for name in run.cast] or \
+        [(run.armature_name, result)]
+    for name, folder in targets:
+        armature = bpy.data.objects.get(name)
+        if armature is None or armature.name not in scene.objects:
+            raise ResultMismatchError(f"armature {name!r} is no longer in scene {scene.name!r}: the result is in "
+                                      f"{result}")
+        frames = key_result(scene, armature, folder, run.frame_offset, run.actor or _fitted_actor(folder))
+    return frames
 
 
 def _fitted_actor(result):

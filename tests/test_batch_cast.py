@@ -95,3 +95,23 @@ def test_track_stops_when_the_worker_that_started_it_is_gone_and_keeps_its_frame
         assert cmd_track.solve_all(session, "OUT", stop_with_parent=option) == code
         assert session.n_done == solved
     assert "stopping with 2 frames solved and saved in OUT (run again with --resume)" in capsys.readouterr().err
+
+
+def test_a_cast_takes_command_carries_its_actors_calibration_and_the_batchs_finishing(tmp_path):
+    """The worker's `track` for a take of several actors: each armature, --resume and --stop-with-parent, whether to
+    fit the builds and each actor's measured lengths, the take's options and the batch's smoothing and exports."""
+    from argparse import Namespace
+
+    from markerless_mocap.core.batch.takes import Take
+    from markerless_mocap.operators.batch_cast import cast_argv
+
+    take = Take("duet", DUET / "subject.blend", DUET, (5, 44), choices={"seed": 2}, calibrate=True,
+                armatures=("Lead", "Partner"), measured=("Partner:height=1.62",))
+    args = Namespace(smooth=6.0, foot_lock=False, foot_lock_speed=0.2, no_export=True, no_overlays=False)
+    argv = cast_argv(["mm"], take, tmp_path / "w", str, args)
+    assert argv[:2] == ["mm", "track"] and argv[argv.index("--frames") + 1] == "5-44"
+    assert [argv[i + 1] for i, a in enumerate(argv) if a == "--armature"] == ["Lead", "Partner"]
+    assert {"--resume", "--stop-with-parent", "--calibrate", "--no-foot-lock", "--no-export"} <= set(argv)
+    assert argv[argv.index("--calibrate-measured") + 1] == "Partner:height=1.62"
+    assert (argv[argv.index("--seed") + 1], argv[argv.index("--smooth") + 1]) == ("2", "6.0")
+    assert "--no-overlays" not in argv

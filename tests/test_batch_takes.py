@@ -63,6 +63,11 @@ def test_every_frame_by_default(tmp_path):
     ("[takes]\n", "unknown takes"),
     (_take("a", armature=["Lead", "Lead"]), "take 'a': armature \\['Lead', 'Lead'\\]: a name given twice"),
     (_take("a", armature=[]), "take 'a': armature must be the armature object's name \\(text\\), or a list"),
+    (_take("a", measured="height=1.7"), "take 'a': measured must be a list of \"SEGMENT=METRES\" texts"),
+    (_take("a", measured=["height=17"]), "take 'a': measured: --measured 'height=17': "),
+    (_take("a", armature=["Lead", "Partner"], measured=["height=1.7"]), "take 'a': measured: .*say whose it is"),
+    (_take("a", measured=["height=1.7"]) + "calibrate = false\n", "take 'a': measured lengths are for fitting the "
+                                                                  "actor, but the take has calibrate = false"),
     (_take("a", armature=["Lead", "Partner"], actor="x.json"), "take 'a': actor is one actor's calibration, but "
                                                                "the take tracks Lead, Partner"),
 ])
@@ -178,15 +183,17 @@ def test_takes_fit_their_actor_by_default_as_track_does(bpy_module, tmp_path, ca
     from markerless_mocap.operators.cli import main
 
     calls = tmp_path / "calibrations.txt"
-    record = (f"import sys; open({str(calls)!r}, 'a').write(' '.join(sys.argv[sys.argv.index('--frames'):][:2]) + "
-              "'\\n'); print('markerless_mocap calibrate: stopped here by the test', file=sys.stderr); sys.exit(2)")
+    record = (f"import sys; a = sys.argv; open({str(calls)!r}, 'a').write(' '.join(a[a.index('--frames'):][:2] + "
+              "[x for i, x in enumerate(a) if a[i - 1] == '--measured']) + '\\n'); "
+              "print('markerless_mocap calibrate: stopped here by the test', file=sys.stderr); sys.exit(2)")
     chunk = "import sys; print('markerless_mocap track-chunk: stopped here by the test', file=sys.stderr); sys.exit(2)"
     monkeypatch.setattr(cmd_batch, "default_command", lambda: [sys.executable, "-c", record])
     monkeypatch.setattr(cmd_batch.Batch, "chunk_argv", lambda self, run, c: [sys.executable, "-c", chunk])
-    path = _toml(tmp_path, _take("long", frames="0-19") + _take("short", frames="20-38") + _take("off", frames="39-58")
-                 + "calibrate = false\n")
+    path = _toml(tmp_path, _take("long", frames="0-19", armature="Armature", measured=["Armature:height=1.7",
+                                                                                     "forearm=0.25"])
+                 + _take("short", frames="20-38") + _take("off", frames="39-58") + "calibrate = false\n")
     assert main(["batch", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--no-overlays"]) == 1
-    assert calls.read_text().splitlines() == ["--frames 0-19"]
+    assert calls.read_text().splitlines() == ["--frames 0-19 height=1.7 forearm=0.25"]  # its measured lengths too
     err = capsys.readouterr().err
     assert "take 'long': actor calibration: markerless_mocap calibrate: stopped here by the test" in err
     calls.unlink()

@@ -221,7 +221,7 @@ def test_several_actors_say_whose_saved_calibration_and_measured_lengths_they_gi
     """With several armatures --actor and --calibrate-measured name their actor (Partner=FILE, Partner:height=1.62);
     with one the name may be left out; a value that names no armature, or two files for one actor, are refused."""
     from markerless_mocap.core.errors import InputError
-    from markerless_mocap.operators.actor_options import options_of
+    from markerless_mocap.core.actor.per_actor import options_of
 
     two = ["--armature", "Lead", "--armature", "Partner"]
     args = _args(tmp_path, *two, "--actor", "Partner=a=b.json", "--calibrate-measured", "Lead:height=1.7",

@@ -206,7 +206,7 @@ def test_several_actors_ask_whose_measurement_and_refuse_names_that_share_a_fold
 
 # ------------------------------------------------------------------------------------------ the Track panel
 @pytest.mark.bpy
-def test_track_panel_with_every_armature_keys_both(addon_module_name, bpy_module, tmp_path):
+def test_track_panel_with_every_armature_keys_both(addon_module_name, bpy_module, tmp_path, monkeypatch):
     """Subject panel: 'Track Every Armature' with two armatures in the scene; Track keys both, each on its own
     person, writes actors/<armature>/ and one tracked.blend; a cluster run is refused with the fix."""
     from scene_helpers import scene_dir
@@ -237,10 +237,6 @@ def test_track_panel_with_every_armature_keys_both(addon_module_name, bpy_module
     m.output_dir = str(tmp_path / "out")
     m.use_frame_range, m.frame_start, m.frame_end = True, 0, 1
     m.preset = "preview"
-    m.run_on = "local"
-    with pytest.raises(RuntimeError, match="Several actors run on this Blender only"):
-        bpy.ops.mocap.track()
-    m.run_on = "this"
     assert bpy.ops.mocap.track() == {"FINISHED"}, m.last_error
     for name in ("Lead", "Partner"):
         arm = bpy.context.scene.objects[name]
@@ -248,6 +244,38 @@ def test_track_panel_with_every_armature_keys_both(addon_module_name, bpy_module
         assert (tmp_path / "out" / "actors" / name / "joints.npz").is_file()
     assert (tmp_path / "out" / "tracked.blend").is_file()
     assert (tmp_path / "out" / "overlay" / "cam1.mp4").is_file()
+
+    # Run On local processes: one take of both actors goes to the batch, with each actor's measured lengths, and
+    # each actor's result is keyed on its own armature when the batch is done (the batch here: this result)
+    from test_addon_ui import _EndedProcess, _write_progress
+
+    import importlib
+
+    cmd_batch = importlib.import_module(f"{addon_module_name}.operators.cmd_batch")
+    track_batch = importlib.import_module(f"{addon_module_name}.operators.track_batch")
+    sent = {}
+
+    def fake_launch(takes, out_dir, **kwargs):
+        sent.update(takes=takes)
+        _write_progress(out_dir, "done", [{"name": takes[0]["name"], "state": "done", "chunks_done": 1,
+                                           "chunks_total": 1, "frames": [0, 1], "result": str(tmp_path / "out"),
+                                           "error": None}], chunks=(1, 1))
+        return _EndedProcess(0)
+
+    monkeypatch.setattr(cmd_batch, "launch_batch", fake_launch)
+    for name in ("Lead", "Partner"):
+        bpy.context.scene.objects[name].animation_data_clear()
+    objects["Partner"].mocap_measured.actor_height = 1.62
+    m.run_on = "local"
+    assert bpy.ops.mocap.track() == {"FINISHED"}, m.last_error
+    (take,) = sent["takes"]
+    assert take["armature"] == ["Lead", "Partner"] and take["measured"] == ["Partner:height=1.62"], take
+    while bpy.context.scene.name in track_batch._RUNS:
+        track_batch.poll(bpy.context.scene.name)
+    assert m.last_error == "" and m.status.startswith("Tracked 2 frames in 1 chunk in "), (m.status, m.last_error)
+    for name in ("Lead", "Partner"):
+        arm = bpy.context.scene.objects[name]
+        assert arm.animation_data is not None and arm.animation_data.action is not None, name  # keyed again
 
 
 def test_the_other_actors_masks_fast_path_covers_the_reference_rasterisers_pixels():

@@ -11,6 +11,8 @@
     actor = "anna/actor.json"       optional: an actor calibration to track with
     calibrate = false               optional: track with the rig's proportions; by default a take of at least
                                     20 frames without `actor` is tracked with the actor's, fitted on its first frames
+    measured = ["height=1.72"]      optional: lengths measured on the actor for that fit (several actors: say whose,
+                                    "Partner:height=1.62")
     seed = 1                        optional: any tracking option, over [defaults]
 
 Every mistake is an InputError naming the take (or the file) and the fix, found before anything is tracked. Whether
@@ -21,15 +23,18 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 from ..actor.actor_file import load_actor
+from ..actor.measured_lengths import parse_measured
+from ..actor.per_actor import options_of
 from ..capture.calibration import find_calibration_file
 from ..capture.capture import load_capture
 from ..errors import InputError
 from ..tracking.options import CHOICE_NAMES, settings_from_choices
 from .chunk_folder import check_take_name
 
-TAKE_KEYS = ("name", "scene", "capture", "frames", "armature", "actor", "calibrate")
+TAKE_KEYS = ("name", "scene", "capture", "frames", "armature", "actor", "calibrate", "measured")
 SUBJECT_FILE = "subject.blend"  # a capture folder's own subject, when a batch is given a folder of captures
 
 
@@ -50,6 +55,7 @@ class Take:
     # the default (fitted on a take long enough for it, as `track` does)
     calibrate: bool | None = None
     armatures: tuple = ()  # several actors tracked at once (then `armature` is None)
+    measured: tuple = ()  # "[ARMATURE:]SEGMENT=METRES" for the actor fit, as `track --calibrate-measured` takes them
 
     @property
     def several(self):
@@ -216,13 +222,34 @@ def _takes_of_file(path, defaults, scene):
         if calibrate and "actor" in entry:
             raise TakeListError(f"{where}: calibrate and actor both given: calibrate fits a new actor.json, actor "
                                 "reuses one; keep one of them")
+        measured = _measured(entry, armature, armatures, where)
         takes.append(Take(
             name, _path(entry["scene"], base, where, "scene") if "scene" in entry else Path(scene),
             _path(entry["capture"], base, where, "capture"),
             _parse_frames(entry["frames"], where) if "frames" in entry else None, armature,
             _path(entry["actor"], base, where, "actor") if "actor" in entry else None,
-            {**defaults, **_choices(entry, where)}, calibrate, armatures))
+            {**defaults, **_choices(entry, where)}, calibrate, armatures, measured))
     return takes
+
+
+def _measured(entry, armature, armatures, where):
+    """A take's `measured` lengths, checked as `track --calibrate-measured` would (each actor's named when the take
+    has several), and refused where no actor is fitted (`actor` given, or `calibrate = false`)."""
+    items = entry.get("measured")
+    if items is None:
+        return ()
+    if not isinstance(items, list) or not all(isinstance(i, str) for i in items):
+        raise TakeListError(f"{where}: measured must be a list of \"SEGMENT=METRES\" texts, as [\"height=1.72\"]")
+    if items and ("actor" in entry or entry.get("calibrate") is False):
+        raise TakeListError(f"{where}: measured lengths are for fitting the actor, but the take "
+                            f"{'reuses actor' if 'actor' in entry else 'has calibrate = false'}: leave one out")
+    names = list(armatures) or ([armature] if armature else [])
+    try:
+        for name in names or [None]:  # each actor's lengths, as the fit will read them
+            parse_measured(options_of(SimpleNamespace(armature=names, calibrate_measured=items), name)[1])
+    except InputError as exc:
+        raise TakeListError(f"{where}: measured: {exc}") from None
+    return tuple(items)
 
 
 def _armatures(value, where):

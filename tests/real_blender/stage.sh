@@ -212,13 +212,19 @@ diff <(cd "$out/command_result" && find . -type f | sort) <(cd "$out/module_resu
   > "$out/files.diff" || fail "--command and python -m wrote different files; see $out/files.diff"
 log "--command run wrote every result file: ${expected[*]} (the same set as python -m markerless_mocap track)"
 
-# 4c. a take sent to local processes from the Track panel (Run On: Local Processes), keyed when the batch ends
-t1=$(date +%s)
-run_in blender -b "$src/sample_scenes/walk/subject.blend" --python-exit-code 1 \
-  --python "$src/tests/real_blender/cluster_take.py" -- "$src/sample_scenes/walk" /mnt/out/cluster_take \
-  > "$out/cluster_take.log" 2>&1 || fail "a take sent to local processes from the Track panel failed; see $out/cluster_take.log"
-grep '^STAGE cluster' "$out/cluster_take.log" | sed 's/^STAGE/[stage]/'
-log "the take on local processes took $(( $(date +%s) - t1 )) s"
+# 4c. a take sent to local processes from the Track panel (Run On: Local Processes), keyed when the batch ends: one
+# actor in chunks (walk), then several actors as one take (duet), each keyed on its own armature
+cluster_take() {  # SCENE: the sample scene whose subject.blend opens and whose capture is sent
+  local t1
+  t1=$(date +%s)
+  run_in blender -b "$src/sample_scenes/$1/subject.blend" --python-exit-code 1 \
+    --python "$src/tests/real_blender/cluster_take.py" -- "$src/sample_scenes/$1" "/mnt/out/cluster_$1" \
+    > "$out/cluster_$1.log" 2>&1 || fail "$1 sent to local processes from the Track panel failed; see $out/cluster_$1.log"
+  grep '^STAGE cluster' "$out/cluster_$1.log" | sed 's/^STAGE/[stage]/'
+  log "$1 on local processes took $(( $(date +%s) - t1 )) s"
+}
+cluster_take walk
+cluster_take duet
 
 # 5. the UI under Xvfb: Import, Check, Track (the calibration first, modal; then tracking, modal), Esc, Resume twice, Export, with screenshots
 start_xvfb

@@ -3,7 +3,7 @@ with several (`--armature` repeated) each names its actor, `--actor Partner=FILE
 Partner:height=1.62` (docs/several-actors.md)."""
 from pathlib import Path
 
-from ..core.errors import InputError
+from ..errors import InputError
 
 
 def _split(item, separator, names, several, option, example):
