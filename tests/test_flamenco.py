@@ -50,6 +50,9 @@ JOBS = [
      "armature": "Rig", "actor": "/farm/actors/anna.json", "runner": "python"},
     {"blendfile": "/farm/s.blend", "capture": "/farm/c", "output_root": "/farm/out", "frames": "7"},
 ]
+# several actors: the take whole in one `track` task
+CAST_JOB = {"blendfile": "/farm/duet.blend", "capture": "/farm/captures/duet", "output_root": "/farm/results",
+            "frames": "0-899", "armature": "Lead, Partner", "seed": 1, "smooth": 6, "runner": "python"}
 
 
 def _python_plan_json(case, capsys):
@@ -90,7 +93,7 @@ def compiled(tmp_path_factory):
             take_names.append({"name": name, "ok": check_take_name(name) == name})
         except InputError:
             take_names.append({"name": name, "ok": False})
-    cases = {"plans": plans, "jobs": JOBS, "take_names": take_names,
+    cases = {"plans": plans, "jobs": JOBS + [CAST_JOB], "take_names": take_names,
              "options": {name: {"values": list(o.values), "default": o.default} for name, o in OPTIONS.items()},
              "defaults": {"chunk_frames": DEFAULT_CHUNK_FRAMES, "warmup": DEFAULT_WARMUP, "overlap": DEFAULT_OVERLAP,
                           "smooth": DEFAULT_CUTOFF_HZ}}
@@ -179,3 +182,13 @@ def test_each_task_runs_the_chunk_command_the_python_plan_names(compiled, index)
         Path(settings["blendfile"]), Path(settings["capture"]), take, settings.get("armature"))
     # the stitch finds the chunk folders by the same settings (their folder names hash them)
     assert all(s == settings_from_args(args).to_dict() for s in parsed_settings)
+
+
+def test_a_job_of_several_actors_tracks_the_take_whole_in_one_task(compiled):
+    (task,) = compiled["jobs"][len(JOBS)]
+    assert task["name"] == "track-duet" and task["type"] == "mocap" and task["depends_on"] == []
+    runner, args = _parse(task)
+    assert (runner, args.command, args.frames, args.armature) == ("python", "track", "0-899", ["Lead", "Partner"])
+    assert (args.scene, args.capture, args.out) == (Path("/farm/duet.blend"), Path("/farm/captures/duet"),
+                                                    Path("/farm/results/duet"))
+    assert args.resume and args.smooth == 6 and args.seed == 1

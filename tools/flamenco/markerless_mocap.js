@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 //
-// Flamenco job type "Markerless Mocap": one take tracked in chunks on the farm's workers, then stitched.
+// Flamenco job type "Markerless Mocap": one take tracked in chunks on the farm's workers, then stitched (a take of
+// several actors, whose armatures the job names: one task tracking it whole).
 //
 // Each chunk is an `exec` task running `markerless_mocap track-chunk` (the command `batch` runs on a Dask
 // worker); a last task runs `markerless_mocap stitch`, which waits for every chunk. The chunks are planned
@@ -34,7 +35,8 @@ const JOB_TYPE = {
         { key: "smooth", type: "float", default: 8.0, propargs: { min: 0 },
           description: "Low-pass the stitched take at this many Hz (0: keep the poses as solved)" },
         { key: "armature", type: "string", required: false,
-          description: "Armature to track if the subject has several (empty: its only one)" },
+          description: "Armature to track if the subject has several (empty: its only one); several, separated by " +
+                       "commas, track those actors at once: the take whole in one task, not in chunks" },
         { key: "actor", type: "string", subtype: "file_path", required: false,
           description: "Actor calibration (actor.json) to track with (empty: none)" },
         // Tracking options: the values and defaults of core/tracking/options.py (the test checks they agree).
@@ -82,6 +84,11 @@ function compileJob(job) {
     const settings = job.settings;
     const take = takeName(settings);
     const [first, last] = parseFrames(settings.frames);
+    const actors = armatureNames(settings);
+    if (actors.length > 1) {
+        compileCast(job, settings, take, first, last, actors);
+        return;
+    }
     const plan = planChunks(first, last, intSetting(settings, "chunk_frames"), intSetting(settings, "warmup"),
                             intSetting(settings, "overlap"));
     const chunksDir = path.join(settings.output_root, CHUNKS_FOLDER);
@@ -107,6 +114,29 @@ function compileJob(job) {
         stitch.addDependency(task);
     }
     job.addTask(stitch);
+}
+
+// Several actors (operators/batch_cast.py): their poses are solved in one frame loop, so the take is one task, the
+// `track` command with every armature; --resume lets a requeued task continue from the frames already solved.
+function compileCast(job, settings, take, first, last, actors) {
+    if (settings.actor) {
+        throw `actor "${settings.actor}": an actor calibration is one actor's, but the job tracks ` +
+              `${actors.join(", ")}; leave it empty (each actor's build is fitted on the take)`;
+    }
+    const args = ["track", "--scene", settings.blendfile, "--capture", settings.capture,
+                  "--out", path.join(settings.output_root, take), "--frames", `${first}-${last}`, "--resume",
+                  "--smooth", String(Number(settings.smooth))];
+    for (const name of actors) args.push("--armature", name);
+    print(`Markerless Mocap: take ${take}, frames ${first}-${last}, ${actors.length} actors in one task`);
+    const task = author.Task(`track-${take}`, TASK_TYPE);
+    task.addCommand(mocapCommand(settings, args.concat(trackingArgs(settings))));
+    job.addTask(task);
+}
+
+function armatureNames(settings) {
+    const names = String(settings.armature || "").split(",").map((name) => name.trim()).filter((name) => name);
+    if (new Set(names).size !== names.length) throw `armature "${settings.armature}": a name given twice`;
+    return names;
 }
 
 // The chunks of frames first..last (inclusive): core/batch/plan.py's plan_chunks, rule for rule. Throws a message

@@ -139,6 +139,20 @@ test("one exec task per chunk, and a stitch task that depends on every one of th
     assert.equal(args[args.indexOf("--out") + 1], "/farm/results/walk01");
 });
 
+test("several actors: one track task for the whole take, no saved calibration, each name once", () => {
+    const job = compile(Object.assign({}, SAMPLE, { armature: " Lead,Partner " }));
+    assert.equal(job.tasks.length, 1);
+    const args = plain(job.tasks[0].commands[0].parameters.args);
+    assert.equal(job.tasks[0].name, "track-walk01");
+    assert.equal(args[3], "track");
+    assert.ok(args.includes("--resume"));
+    assert.deepEqual(args.filter((_, i) => args[i - 1] === "--armature"), ["Lead", "Partner"]);
+    assert.equal(args[args.indexOf("--out") + 1], "/farm/results/walk01");
+    assert.match(thrownBy(() => compile(Object.assign({}, SAMPLE, { armature: "Lead,Partner", actor: "/a.json" }))),
+                 /an actor calibration is one actor's/);
+    assert.match(thrownBy(() => compile(Object.assign({}, SAMPLE, { armature: "Lead, Lead" }))), /a name given twice/);
+});
+
 test("the python runner, a named take and bad settings", () => {
     const job = compile(Object.assign({}, SAMPLE, { runner: "python", take: "day2.take-07", frames: "5" }));
     assert.equal(job.tasks.length, 2);
