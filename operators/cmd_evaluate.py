@@ -14,7 +14,8 @@ def add_arguments(p):
     p.add_argument("--result", type=Path, required=True,
                    help="result folder (holding joints.npz, poses.npz); of several actors: OUT/actors/NAME, or OUT "
                         "itself with --capture (each actor measured, the sheet draws them all)")
-    p.add_argument("--truth", type=Path, help="ground truth joints (gt_joints.npz); without it, the agreement "
+    p.add_argument("--truth", type=Path, help="ground truth joints (gt_joints.npz; a result of several actors: the "
+                                              "folder holding gt_joints_<armature>.npz); without it, the agreement "
                                               "with the learned evidence is measured (needs --capture)")
     p.add_argument("--capture", type=Path, help="the capture folder the result was tracked on (with --truth: also "
                                                 "the error of its landmarks triangulated alone, the baseline)")
@@ -47,6 +48,28 @@ def _print_truth(args):
         extra["raw_mean_mm"] = float(1000 * raw_errors.mean())
         print(f"as solved, before smoothing (joints_raw.npz): {extra['raw_mean_mm']:.1f} mm")
     print(summary.json_line(result=str(args.result), **extra))
+
+
+def _print_cast_truth(args, cast):
+    """Each actor of a result of several actors against its truth: `--truth` a folder holding
+    gt_joints_<armature>.npz per actor (the sample scenes' layout); a truth file is one person's."""
+    import argparse
+
+    names = ", ".join(name for name, _ in cast)
+    if not Path(args.truth).is_dir():
+        raise EvaluationError(f"{args.result} holds several actors ({names}) and {args.truth} is one person's truth: "
+                              f"give the folder holding gt_joints_<armature>.npz for each, or one actor's folder with "
+                              f"its truth, --result {Path(args.result) / 'actors' / cast[0][0]}")
+    truths = [Path(args.truth) / f"gt_joints_{name}.npz" for name, _ in cast]
+    missing = [str(t) for t in truths if not t.is_file()]
+    if missing:
+        raise EvaluationError(f"no truth for {len(missing)} of the actors ({names}): {', '.join(missing)} missing")
+    for (name, folder), truth in zip(cast, truths):
+        print(f"{name} ({folder}):")
+        one = argparse.Namespace(**{**vars(args), "result": folder, "truth": truth, "plot": None})
+        _print_truth(one)
+        if args.capture is not None:
+            _print_triangulation(one)
 
 
 def _print_triangulation(args):
@@ -172,12 +195,9 @@ def _sheet(args, capture, actors):
 def run(args):
     try:
         cast = cast_actors(args.result)
-        if cast and args.truth is not None:  # a truth file is one person's
-            names = ", ".join(name for name, _ in cast)
-            raise EvaluationError(f"{args.result} holds several actors ({names}): give one actor's folder with its "
-                                  f"truth, --result {Path(args.result) / 'actors' / cast[0][0]} (the sample scenes "
-                                  "keep gt_joints_<armature>.npz)")
-        if args.truth is not None:
+        if cast and args.truth is not None:
+            _print_cast_truth(args, cast)
+        elif args.truth is not None:
             _print_truth(args)
             if args.capture is not None:
                 _print_triangulation(args)

@@ -1,5 +1,7 @@
 """Several actors: the silhouette statistics skip the pixels other actors cover (mutual occlusion), checked
 against a reference render of both bodies together."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -180,7 +182,12 @@ def test_track_with_two_armatures_keys_each_on_its_own_person(tmp_path, capsys):
 
     assert cv2.imread(str(tmp_path / "sheet.png")).shape[0] > 0
     assert main(["evaluate", "--result", str(out), "--truth", str(duet / "gt_joints_Lead.npz")]) == 2
-    assert f"give one actor's folder with its truth, --result {out / 'actors' / 'Lead'}" in capsys.readouterr().err
+    assert f"or one actor's folder with its truth, --result {out / 'actors' / 'Lead'}" in capsys.readouterr().err
+    # with the folder of every actor's truth (gt_joints_<armature>.npz), each actor against its own
+    assert main(["evaluate", "--result", str(out), "--truth", str(duet)]) == 0
+    measured = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.startswith("{")]
+    assert [Path(m["result"]).name for m in measured] == ["Lead", "Partner"]
+    assert all(m["frames"] == 13 and m["mean_mm"] < 100 for m in measured), measured
 
 
 def test_several_actors_ask_whose_measurement_and_refuse_names_that_share_a_folder(tmp_path, capsys):
