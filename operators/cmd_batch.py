@@ -50,6 +50,9 @@ def add_arguments(p):
     add_chunk_arguments(p)
     p.add_argument("--chunks", type=Path, help="where the chunk folders go (default DIR/_chunks; shared storage)")
     p.add_argument("--scene", type=Path, help="the subject for captures without their own subject.blend")
+    p.add_argument("--armature", action="append",
+                   help="the armature to track in takes that do not name theirs (a folder of captures); repeat it to "
+                        "track several actors in each")
     p.add_argument("--worker-command", help="what runs markerless_mocap on a worker, e.g. \"/opt/blender/blender "
                                             "--background --command markerless_mocap\" (default: as here)")
     p.add_argument("--path-map", action="append", default=[], metavar="HERE=THERE",
@@ -621,7 +624,7 @@ def run(args):
             from ..core.errors import InputError
 
             raise InputError(f"--workers {args.workers}: at least one")
-        takes = read_take_list(args.takes, defaults=_choices_of(args), scene=args.scene)
+        takes = read_take_list(args.takes, defaults=_choices_of(args), scene=args.scene, armature=args.armature)
         check_rigs(takes)
         if args.no_calibrate:
             for take in takes:

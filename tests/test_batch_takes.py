@@ -81,6 +81,16 @@ def test_a_folder_of_captures(tmp_path):
     (tmp_path / "notes").mkdir()  # no calibration: not a take
     (take,) = read_take_list(tmp_path)
     assert (take.name, take.scene, take.frames) == ("walk", tmp_path / "walk" / "subject.blend", (0, 59))
+    # `batch --armature` names the armature(s) of the takes that do not name theirs: a folder's, or a list's
+    (take,) = read_take_list(tmp_path, armature=["Lead", "Partner"])
+    assert (take.armature, take.armatures) == (None, ("Lead", "Partner"))
+    listed = _toml(tmp_path, _take("own", armature="Rig", frames="0-9")
+                   + _take("named", frames="10-19", measured=["Partner:height=1.62"]))
+    own, named = read_take_list(listed, armature=["Lead", "Partner"])
+    assert (own.armature, own.armatures, named.armatures, named.measured) == (
+        "Rig", (), ("Lead", "Partner"), ("Partner:height=1.62",))
+    with pytest.raises(TakeListError, match="take 'named': measured: .*say whose it is"):
+        read_take_list(_toml(tmp_path, _take("named", measured=["height=1.62"])), armature=["Lead", "Partner"])
 
 
 def test_the_batch_refuses_a_subject_without_a_rig(bpy_module, tmp_path, capsys):

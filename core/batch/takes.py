@@ -149,9 +149,10 @@ def _check_overlaps(takes):
                                     "frame to one take")
 
 
-def read_take_list(path, defaults=None, scene=None):
+def read_take_list(path, defaults=None, scene=None, armature=None):
     """The takes of a TAKES.toml file or a folder of capture folders, checked. `defaults`: tracking options from
-    the command line (below the file's [defaults]); `scene`: the subject for captures without their own."""
+    the command line (below the file's [defaults]); `scene`: the subject for captures without their own;
+    `armature`: a name or a list of names (several actors) for the takes that do not name theirs."""
     path = Path(path)
     defaults = {k: v for k, v in (defaults or {}).items() if v is not None}
     if path.is_dir():
@@ -162,10 +163,15 @@ def read_take_list(path, defaults=None, scene=None):
         raise TakeListError(f"{path}: no such take list (a TAKES.toml file or a folder of capture folders)")
     if not takes:
         raise TakeListError(f"{path}: no takes in it ([[take]] tables, or capture folders with a calibration)")
+    if armature:
+        for take in takes:
+            if take.armature is None and not take.armatures:
+                take.armature, take.armatures = _armatures(armature, f"take {take.name!r}: --armature")
     for take in takes:
         where = f"take {take.name!r}"
         _check_files(take, where)
         _check_capture(take, where)
+        _check_measured(take, where)
     _check_overlaps(takes)
     return takes
 
@@ -222,7 +228,7 @@ def _takes_of_file(path, defaults, scene):
         if calibrate and "actor" in entry:
             raise TakeListError(f"{where}: calibrate and actor both given: calibrate fits a new actor.json, actor "
                                 "reuses one; keep one of them")
-        measured = _measured(entry, armature, armatures, where)
+        measured = _measured(entry, where)
         takes.append(Take(
             name, _path(entry["scene"], base, where, "scene") if "scene" in entry else Path(scene),
             _path(entry["capture"], base, where, "capture"),
@@ -232,9 +238,9 @@ def _takes_of_file(path, defaults, scene):
     return takes
 
 
-def _measured(entry, armature, armatures, where):
-    """A take's `measured` lengths, checked as `track --calibrate-measured` would (each actor's named when the take
-    has several), and refused where no actor is fitted (`actor` given, or `calibrate = false`)."""
+def _measured(entry, where):
+    """A take's `measured` lengths (texts; read per actor by _check_measured), refused where no actor is fitted
+    (`actor` given, or `calibrate = false`)."""
     items = entry.get("measured")
     if items is None:
         return ()
@@ -243,13 +249,19 @@ def _measured(entry, armature, armatures, where):
     if items and ("actor" in entry or entry.get("calibrate") is False):
         raise TakeListError(f"{where}: measured lengths are for fitting the actor, but the take "
                             f"{'reuses actor' if 'actor' in entry else 'has calibrate = false'}: leave one out")
-    names = list(armatures) or ([armature] if armature else [])
+    return tuple(items)
+
+
+def _check_measured(take, where):
+    """The take's measured lengths read as `track --calibrate-measured` reads them, each actor's named when the take
+    has several (its armatures known by now, the command line's --armature included)."""
+    names = list(take.armatures) or ([take.armature] if take.armature else [])
     try:
-        for name in names or [None]:  # each actor's lengths, as the fit will read them
-            parse_measured(options_of(SimpleNamespace(armature=names, calibrate_measured=items), name)[1])
+        for name in names or [None]:
+            parse_measured(options_of(SimpleNamespace(armature=names, calibrate_measured=list(take.measured)),
+                                      name)[1])
     except InputError as exc:
         raise TakeListError(f"{where}: measured: {exc}") from None
-    return tuple(items)
 
 
 def _armatures(value, where):
