@@ -42,6 +42,7 @@ INTERNAL_ERRORS = [
     ("core.render.glsl", "GlslInputError"), ("core.results.result_folder", "ResultWriteError"),
     ("addon.gpu_likelihood", "GpuUnavailableError"), ("operators.cmd_build", "BuildFailedError"),
     ("operators.cmd_build", "ZipTooLargeError"),
+    ("operators.cmd_track", "ParentGone"),  # --stop-with-parent: the batch worker went; caught, exit 75
 ]
 
 
