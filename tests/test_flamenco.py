@@ -150,13 +150,19 @@ def test_each_task_runs_the_chunk_command_the_python_plan_names(compiled, index)
     plan = plan_chunks(first, last, k, w, o)
     take = settings.get("take") or Path(settings["capture"]).name
     out_root = Path(settings["output_root"])
-    chunk_tasks, stitch = tasks[:-1], tasks[-1]
-    assert len(chunk_tasks) == len(plan)
+    seeds = [t for t in tasks if t["name"] == f"seeds-{take}"]
+    chunk_tasks, stitch = tasks[len(seeds):-1], tasks[-1]
+    assert len(chunk_tasks) == len(plan) and len(seeds) == (len(plan) > 1)
+    for task in seeds:  # where the chunks after the first start (core/batch/seed.py), planned as the chunks are
+        _, args = _parse(task)
+        assert (args.command, args.frames, args.take, args.chunks) == (
+            "seed-chunks", f"{first}-{last}", take, out_root / "_chunks")
+        assert (args.chunk_frames, args.warmup, args.overlap) == (k, w, o) and task["depends_on"] == []
 
     chosen = {name: settings.get(name) for name in OPTIONS if settings.get(name) is not None}
     parsed_settings = []
     for chunk, task in zip(plan, chunk_tasks):
-        assert task["type"] == "mocap" and task["depends_on"] == []
+        assert task["type"] == "mocap" and task["depends_on"] == ([] if chunk.index == 0 else [f"seeds-{take}"])
         assert task["name"] == f"track-{take}-{chunk.name}"
         runner, args = _parse(task)
         assert runner == settings.get("runner", "blender")

@@ -4,7 +4,8 @@
 // several actors, whose armatures the job names: one task tracking it whole).
 //
 // Each chunk is an `exec` task running `markerless_mocap track-chunk` (the command `batch` runs on a Dask
-// worker); a last task runs `markerless_mocap stitch`, which waits for every chunk. The chunks are planned
+// worker), the chunks after the first after a `seed-chunks` task (where each starts); a last task runs
+// `markerless_mocap stitch`, which waits for every chunk. The chunks are planned
 // exactly as core/batch/plan.py plans them (tests/test_flamenco.py compares the two under Node), so a take
 // sent here and one sent to `batch` share their chunk folders: a chunk finished by either is never redone.
 // Install: tools/flamenco/README.md.
@@ -96,19 +97,30 @@ function compileJob(job) {
         .concat(optionalArgs(settings), trackingArgs(settings));
     print(`Markerless Mocap: take ${take}, frames ${first}-${last}, ${plan.length} chunk(s)`);
 
+    const planArgs = ["--chunk-frames", String(intSetting(settings, "chunk_frames")),
+                      "--warmup", String(intSetting(settings, "warmup")),
+                      "--overlap", String(intSetting(settings, "overlap"))];
+    // The chunks after the first start where the seed pass found the person (core/batch/seed.py), as `batch`
+    // runs them; the stitch refuses a later chunk that started from the subject's placement instead.
+    let seeds = null;
+    if (plan.length > 1) {
+        seeds = author.Task(`seeds-${take}`, TASK_TYPE);
+        seeds.addCommand(mocapCommand(settings, ["seed-chunks", "--frames", `${first}-${last}`, "--chunks", chunksDir]
+            .concat(planArgs, common)));
+        job.addTask(seeds);
+    }
     const chunkTasks = plan.map((chunk) => {
         const task = author.Task(`track-${take}-${chunk.name}`, TASK_TYPE);
         task.addCommand(mocapCommand(settings, ["track-chunk", "--frames", `${chunk.track[0]}-${chunk.track[1]}`,
                                                 "--chunks", chunksDir].concat(common)));
+        if (chunk.index > 0) task.addDependency(seeds);
         job.addTask(task);
         return task;
     });
     const stitch = author.Task(`stitch-${take}`, TASK_TYPE);
     stitch.addCommand(mocapCommand(settings, [
         "stitch", "--frames", `${first}-${last}`, "--chunks", chunksDir, "--out", path.join(settings.output_root, take),
-        "--chunk-frames", String(intSetting(settings, "chunk_frames")),
-        "--warmup", String(intSetting(settings, "warmup")), "--overlap", String(intSetting(settings, "overlap")),
-        "--smooth", String(Number(settings.smooth)),
+        ...planArgs, "--smooth", String(Number(settings.smooth)),
     ].concat(common)));
     for (const task of chunkTasks) {
         stitch.addDependency(task);

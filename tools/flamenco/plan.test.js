@@ -113,13 +113,17 @@ test("one exec task per chunk, and a stitch task that depends on every one of th
     const job = compile(SAMPLE);
     const { planChunks } = loadJobType();
     const plan = planChunks(0, 999, 300, 10, 5);
-    assert.equal(job.tasks.length, plan.length + 1);
-    const chunkTasks = job.tasks.slice(0, -1);
+    assert.equal(job.tasks.length, plan.length + 2);
+    const seeds = job.tasks[0];
+    assert.equal(seeds.name, "seeds-walk01");
+    assert.equal(plain(seeds.commands[0].parameters.args)[3], "seed-chunks");
+    const chunkTasks = job.tasks.slice(1, -1);
     const stitch = job.tasks[job.tasks.length - 1];
     for (const [i, task] of chunkTasks.entries()) {
         assert.equal(task.name, `track-walk01-${plan[i].name}`);
         assert.equal(task.type, "mocap");
-        assert.equal(task.dependencies.length, 0);
+        // the first chunk starts at the placement, as `track` does; the others where the seed pass found the person
+        assert.deepEqual(task.dependencies.map((d) => d.name), i === 0 ? [] : ["seeds-walk01"]);
         assert.equal(task.commands.length, 1);
         const { name, parameters } = task.commands[0];
         assert.equal(name, "exec");
@@ -155,7 +159,7 @@ test("several actors: one track task for the whole take, no saved calibration, e
 
 test("the python runner, a named take and bad settings", () => {
     const job = compile(Object.assign({}, SAMPLE, { runner: "python", take: "day2.take-07", frames: "5" }));
-    assert.equal(job.tasks.length, 2);
+    assert.equal(job.tasks.length, 2); // one chunk: no seed pass
     assert.equal(job.tasks[0].commands[0].parameters.exe, "{mocap_python}");
     assert.deepEqual(plain(job.tasks[0].commands[0].parameters.args).slice(0, 3), ["-m", "markerless_mocap",
                                                                                   "track-chunk"]);
