@@ -107,12 +107,12 @@ def _inputs(context):
     return targets, Path(bpy.path.abspath(props.capture_dir)), settings
 
 
-def measured_lengths_for(props, targets):
-    """Per target (armature, folder) the lengths measured on its actor: the Subject panel's for one actor, each
-    armature's own (Object.mocap_measured) for several."""
-    if len(targets) == 1:
+def measured_lengths_for(props, armatures):
+    """Per armature the lengths measured on its actor: the Subject panel's for one actor, each armature's own
+    (Object.mocap_measured) for several."""
+    if len(armatures) == 1:
         return [_measured(props)]
-    return [_measured(armature.mocap_measured, f"{armature.name}: ") for armature, _folder in targets]
+    return [_measured(armature.mocap_measured, f"{armature.name}: ") for armature in armatures]
 
 
 def calibrate_here(context):
@@ -122,7 +122,7 @@ def calibrate_here(context):
 
     targets, capture_dir, settings = _inputs(context)
     props = context.scene.mocap
-    measured = measured_lengths_for(props, targets)
+    measured = measured_lengths_for(props, [armature for armature, _folder in targets])
     return [calibrate_actor(context.scene, armature, capture_dir, out_dir, settings, frames=_calibration_frames(props),
                             measured=lengths)
             for (armature, out_dir), lengths in zip(targets, measured)]
@@ -197,7 +197,8 @@ class MOCAP_OT_calibrate_actor(bpy.types.Operator):
             targets, capture_dir, settings = _inputs(context)
             if settings.backend == "gpu":
                 return self.execute(context)
-            measured = measured_lengths_for(props, targets)  # checked before anything is tracked
+            # checked before anything is tracked
+            measured = measured_lengths_for(props, [armature for armature, _folder in targets])
             self._queue = [(armature, out_dir, lengths) for (armature, out_dir), lengths in zip(targets, measured)]
             self._capture, self._settings, self._fits = capture_dir, settings, []
             self._start_next(context)

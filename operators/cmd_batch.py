@@ -541,7 +541,7 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
         argv = [*command, "calibrate", "--scene", mapped(take.scene), "--capture", mapped(take.capture),
                 "--out", mapped(shared), "--frames", f"{first}-{last}"]
         argv += (["--armature", take.armature] if take.armature else []) + option_args(take.choices)
-        for length in one_actors_measured(take):
+        for length in take.measured_of(take.armature):  # as `calibrate --measured` takes them
             argv += ["--measured", length]
         print(f"batch: take {take.name!r}: calibrating the actor on frames {first}-{last}", file=sys.stderr,
               flush=True)
@@ -567,17 +567,6 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
         if pending:
             time.sleep(POLL_SECONDS)
     return failed
-
-
-def one_actors_measured(take):
-    """A one-actor take's measured lengths as `calibrate --measured` takes them (SEGMENT=METRES, its armature's
-    name, if written before, left out)."""
-    from types import SimpleNamespace
-
-    from ..core.actor.per_actor import options_of
-
-    names = [take.armature] if take.armature else []
-    return options_of(SimpleNamespace(armature=names, calibrate_measured=list(take.measured)), take.armature)[1]
 
 
 def _keep_in_result(take, out):

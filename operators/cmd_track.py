@@ -154,21 +154,17 @@ class ParentGone(Exception):
 
 
 def parent_watch():
-    """A check that raises ParentGone once this process's parent has changed (it ended: the process was
-    re-parented)."""
+    """A predicate, true once this process's parent has ended (the process was re-parented): --stop-with-parent."""
     parent = os.getppid()
-
-    def check():
-        if os.getppid() != parent:
-            raise ParentGone
-    return check
+    return lambda: os.getppid() != parent
 
 
-def run_session(session, progress=None, log=print, before_frame=None):
+def run_session(session, progress=None, log=print, stop=None):
+    """Solve and key every frame left; `stop`: a predicate asked before each frame, ParentGone raised when true."""
     progress = progress or Progress(session.n_total, session.n_done)
     while True:
-        if before_frame is not None:
-            before_frame()
+        if stop is not None and stop():
+            raise ParentGone
         est = session.solve_next()
         if est is None:
             break
@@ -286,7 +282,7 @@ def solve_all(session, out, stop_with_parent=False):
     from .failures import cli_failure
 
     try:
-        run_session(session, before_frame=parent_watch() if stop_with_parent else None)
+        run_session(session, stop=parent_watch() if stop_with_parent else None)
     except ParentGone:
         print(f"markerless_mocap track: the process that started this one has ended; stopping with {session.n_done} "
               f"frames solved and saved in {out} (run again with --resume)", file=sys.stderr)

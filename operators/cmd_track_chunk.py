@@ -5,11 +5,11 @@ take's subject, capture and settings and the chunk's frames (a chunk plan's `tra
 tracks as `track` does, from the first-frame search at the chunk's first frame, and writes no keys, exports or
 overlays: `stitch` makes the take's result folder. A finished chunk is never tracked again (exit 0 at once).
 """
-import os
 import sys
 from pathlib import Path
 
-from .cmd_track import StepPrinter, add_tracking_options, open_subject, parse_frames, settings_from_args
+from .cmd_track import (StepPrinter, add_tracking_options, open_subject, parent_watch, parse_frames,
+                        settings_from_args)
 from .failures import EXIT_PARENT_GONE
 
 
@@ -57,7 +57,7 @@ def run(args):
     from .failures import USER_ERRORS, cli_failure
     from .track_session import TrackSession
 
-    parent = os.getppid()
+    parent_gone = parent_watch()
     frames = parse_frames(args.frames)
     try:
         settings, actor, key = take_inputs(args)
@@ -87,7 +87,7 @@ def run(args):
         session.writer.info["backend"] = choice.to_dict()
         session.writer.info["chunk"] = {"take": args.take, "track": [frames[0], frames[-1]], "key": key}
         while True:
-            if args.stop_with_parent and os.getppid() != parent:
+            if args.stop_with_parent and parent_gone():
                 print("markerless_mocap track-chunk: the process that started this chunk has ended; stopping "
                       "(the chunk is run again elsewhere)", file=sys.stderr)
                 return EXIT_PARENT_GONE

@@ -105,7 +105,7 @@ def _measured_lengths(props, armatures):
 
     several = len(armatures) > 1
     out = []
-    for armature, lengths in zip(armatures, measured_lengths_for(props, [(a, None) for a in armatures])):
+    for armature, lengths in zip(armatures, measured_lengths_for(props, armatures)):
         out += [f"{armature.name}:{name}={metres:g}" if several else f"{name}={metres:g}"
                 for name, metres in lengths.items()]
     return out

@@ -61,6 +61,12 @@ class Take:
     def several(self):
         return len(self.armatures) > 1
 
+    def measured_of(self, name):
+        """The SEGMENT=METRES lengths of actor `name` (None: the take's one actor), read from `measured` as `track
+        --calibrate-measured` reads them (an InputError where several actors are tracked and one is not named)."""
+        names = list(self.armatures) or ([self.armature] if self.armature else [])
+        return options_of(SimpleNamespace(armature=names, calibrate_measured=list(self.measured)), name)[1]
+
     def settings(self):
         return settings_from_choices(self.choices)
 
@@ -255,11 +261,9 @@ def _measured(entry, where):
 def _check_measured(take, where):
     """The take's measured lengths read as `track --calibrate-measured` reads them, each actor's named when the take
     has several (its armatures known by now, the command line's --armature included)."""
-    names = list(take.armatures) or ([take.armature] if take.armature else [])
     try:
-        for name in names or [None]:
-            parse_measured(options_of(SimpleNamespace(armature=names, calibrate_measured=list(take.measured)),
-                                      name)[1])
+        for name in take.armatures or [take.armature]:
+            parse_measured(take.measured_of(name))
     except InputError as exc:
         raise TakeListError(f"{where}: measured: {exc}") from None
 
