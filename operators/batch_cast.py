@@ -58,15 +58,11 @@ class CastRun:
 
     def frames_done(self):
         """The frames every actor has solved (each actor's report.json, written as frames are solved)."""
+        from ..core.batch.progress import frames_solved
+
         if self.finished:
             return self.frames_total
-        solved = []
-        for report in (self.work / "actors").glob("*/report.json"):
-            try:
-                solved.append(int(json.loads(report.read_text())["totals"]["frames"]))
-            except (OSError, ValueError, KeyError, TypeError):
-                solved.append(0)
-        return min(solved) if solved else 0
+        return min((frames_solved(actor) for actor in (self.work / "actors").glob("*/")), default=0)
 
     def fail(self, reason):
         self.state, self.error = "failed", f"take {self.take.name!r}: {reason}"

@@ -23,8 +23,8 @@ import time
 from pathlib import Path
 
 from ..core.atomic_files import write_json
-from ..core.batch.progress import (CANCEL_FILE, cancel_requested, progress_lines, read_progress, request_cancel,
-                                   write_progress)
+from ..core.batch.progress import (CANCEL_FILE, cancel_requested, frames_solved, progress_lines, read_progress,
+                                   request_cancel, write_progress)
 from ..core.tracking.options import CHOICE_NAMES
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
@@ -249,13 +249,7 @@ class TakeRun:
 
 def _partial_frames(path):
     """Frames solved so far by an unfinished chunk (its partial folders' report.json)."""
-    best = 0
-    for partial in path.parent.glob(f".{path.name}.partial-*"):
-        try:
-            best = max(best, int(json.loads((partial / "report.json").read_text())["totals"]["frames"]))
-        except (OSError, ValueError, KeyError, TypeError):
-            continue
-    return best
+    return max((frames_solved(partial) for partial in path.parent.glob(f".{path.name}.partial-*")), default=0)
 
 
 class Batch:

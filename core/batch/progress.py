@@ -20,6 +20,15 @@ FILE_NAME = "batch-progress.json"
 CANCEL_FILE = "batch-cancel"  # its presence asks a running batch to stop
 
 
+def frames_solved(result_folder):
+    """Frames a result folder being tracked has solved so far (its report.json, rewritten as frames are solved);
+    0 while it has none, or cannot be read."""
+    try:
+        return int(json.loads((Path(result_folder) / "report.json").read_text())["totals"]["frames"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0
+
+
 def write_progress(folder, progress):
     progress = {**progress, "updated": time.time()}
     write_json(Path(folder) / FILE_NAME, progress)
