@@ -103,25 +103,22 @@ def _load_result(result_dir):
         raise EvaluationError(f"{path} is not the poses.npz of a result folder ({exc})") from exc
 
 
+def _report(result_dir):
+    """A result folder's report.json as a dict ({} when it has none that reads)."""
+    try:
+        report = json.loads((Path(result_dir) / "report.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return report if isinstance(report, dict) else {}
+
+
 def cast_actors(result_dir):
     """[(armature name, its result folder)] when `result_dir` holds several actors (its report.json lists them,
     docs/several-actors.md), else None."""
-    report = Path(result_dir) / "report.json"
-    if (Path(result_dir) / "poses.npz").is_file() or not report.is_file():
+    if (Path(result_dir) / "poses.npz").is_file():
         return None
-    try:
-        actors = json.loads(report.read_text()).get("actors")
-    except (ValueError, AttributeError):
-        return None
+    actors = _report(result_dir).get("actors")
     return [(a["armature"], Path(result_dir) / a["folder"]) for a in actors] if actors else None
-
-
-def _tracked_armature(result_dir):
-    """The armature a result folder was tracked on (report.json), None when it does not say."""
-    try:
-        return json.loads((Path(result_dir) / "report.json").read_text()).get("armature")
-    except (OSError, ValueError, AttributeError):
-        return None
 
 
 def _subject(args, result_dir):
@@ -130,7 +127,7 @@ def _subject(args, result_dir):
 
     scene = open_subject(args.scene or args.capture / "subject.blend")
     # the result's own armature: a scene of several actors has one per actor
-    body = body_from_blender(find_armature(scene, _tracked_armature(result_dir)), None, scene)
+    body = body_from_blender(find_armature(scene, _report(result_dir).get("armature")), None, scene)
     actor_file = Path(result_dir) / "actor.json"
     if actor_file.is_file():  # tracked with an actor calibration: the poses are the actor body's
         from ..core.actor.actor_file import actor_body, load_actor
