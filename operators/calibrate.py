@@ -83,7 +83,7 @@ def calibration_made_on(actor_file, capture):
 def cast_actor_file(context, armature):
     """Where the build of one of several actors is saved: its result folder's actor.json (OUT/actors/<armature>/), as
     `track --armature A --armature B` saves it."""
-    from .cast_session import ACTORS_FOLDER, actor_folder_name
+    from ..core.results.result_folder import ACTORS_FOLDER, actor_folder_name
     from .track import output_folder
 
     return Path(output_folder(context)) / ACTORS_FOLDER / actor_folder_name(armature.name) / "actor.json"

@@ -5,17 +5,14 @@ layout (joints, poses, report, checkpoint, BVH, FBX, overlays), solved frame by 
 actor sees the others' bodies (core/tracking/cast.py). OUT/report.json lists the actors and their folders
 (docs/several-actors.md). Like TrackSession, `solve_next` is engine work; the rest runs on the main thread.
 """
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.atomic_files import atomic_path, write_json
 from ..core.errors import InputError
-from ..core.results.result_folder import require_writable_folder
+from ..core.results.result_folder import ACTORS_FOLDER, actor_folder_name, require_writable_folder
 from ..core.tracking.cast import others_of
 from .track_session import TrackSession
-
-ACTORS_FOLDER = "actors"
 
 
 @dataclass
@@ -38,11 +35,6 @@ class CastEstimate:
 
 class CastError(InputError, ValueError):
     """The armatures given for several actors cannot be tracked together (the message says why)."""
-
-
-def actor_folder_name(name):
-    """A folder name for an armature's name (characters a file system may refuse replaced by _)."""
-    return re.sub(r'[<>:"/\\|?*\x00-\x1f]', "_", name).strip(" .") or "armature"
 
 
 def cast_folders(names):

@@ -25,6 +25,7 @@ from pathlib import Path
 from ..core.atomic_files import write_json
 from ..core.batch.progress import (CANCEL_FILE, cancel_requested, frames_solved, progress_lines, read_progress,
                                    request_cancel, write_progress)
+from ..core.results.result_folder import ACTORS_FOLDER, actor_folder_name
 from ..core.tracking.options import CHOICE_NAMES
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
@@ -209,10 +210,12 @@ def check_rigs(takes):
 
 
 class TakeRun:
-    """One take in the batch: its chunks' folders and futures, its stitch, its state."""
+    """One take in the batch: its chunks' folders and futures, its stitch, its state. `seeds`: the seed pass's files,
+    one per actor (core/batch/seed.py); `actor_folders`: each actor's folder name in a take of several, else [None]."""
 
-    def __init__(self, take, plan, folders, seeds):
-        self.take, self.plan, self.folders, self.seeds = take, plan, folders, seeds
+    def __init__(self, take, plan, folders, seeds, actor_folders=(None,)):
+        self.take, self.plan, self.folders, self.seeds = take, plan, folders, list(seeds)
+        self.actor_folders = list(actor_folders)
         self.futures = {}  # chunk index -> future
         self.attempts = {}  # chunk index -> runs that ended with a failure that is not the user's
         self.seed_future = None  # the seed pass (core/batch/seed.py), before the chunks after the first
@@ -224,6 +227,10 @@ class TakeRun:
     @property
     def chunks_done(self):
         return sum(f.done for f in self.folders)
+
+    @property
+    def seeded(self):
+        return all(path.is_file() for path in self.seeds)
 
     def frames_done(self):
         done = 0
@@ -268,10 +275,12 @@ class Batch:
         take = run.take
         argv = ["--scene", mapped(take.scene), "--capture", mapped(take.capture), "--take", take.name,
                 "--chunks", mapped(self.chunks_root)]
-        if take.armature:
-            argv += ["--armature", take.armature]
+        for name in take.names:
+            argv += ["--armature", name] if name else []
         if take.actor is not None:
             argv += ["--actor", mapped(take.actor)]
+        for name, path in take.fitted.items():  # several actors: each one's fit, named
+            argv += ["--actor", f"{name}={mapped(path)}"]
         return argv + option_args(take.choices)
 
     def chunk_argv(self, run, chunk):
@@ -309,19 +318,11 @@ class Batch:
                                                          check=False)
 
     def run(self, runner):
-        from .batch_cast import CastRun, finish_cast, poll_cast, submit_cast
-
         for run in self.runs:
             if run.state == "failed":  # before anything ran (its actor calibration)
                 continue
-            if isinstance(run, CastRun):
-                if run.finished:  # by the same command in an earlier run of the batch
-                    finish_cast(run, self.args.out)
-                else:
-                    submit_cast(runner, run)
-                continue
             later = [f for f in run.folders[1:] if not f.done]
-            if later and not run.seeds.is_file():  # the chunks after the first start where the seed pass says
+            if later and not run.seeded:  # the chunks after the first start where the seed pass says
                 run.seed_future = runner.submit(f"{run.take.name}-seeds", self.seed_argv(run))
             self._submit_chunks(runner, run, first_only=run.seed_future is not None)
             run.state = "running" if run.futures or run.seed_future else "queued"
@@ -330,9 +331,6 @@ class Batch:
                 self.cancel()
                 return EXIT_CANCELLED
             for run in self.runs:
-                if isinstance(run, CastRun):
-                    poll_cast(runner, run, self.args.out)
-                    continue
                 self._poll_seeds(runner, run)
                 self._poll_chunks(runner, run)
             self._poll_stitches()
@@ -360,18 +358,19 @@ class Batch:
         if future.status == "pending":  # chunks whose first frame the pass has reached begin now
             for chunk, folder in zip(run.plan, run.folders):
                 if chunk.index and chunk.index not in run.futures and not folder.done:
-                    if find_seed(self.chunks_root, run.take.name, folder.key, chunk.track[0]) is None:
+                    if any(find_seed(self.chunks_root, run.take.name, folder.key, chunk.track[0], part) is None
+                           for part in run.actor_folders):
                         break
                     run.futures[chunk.index] = runner.submit(f"{run.take.name}-{chunk.name}",
                                                              self.chunk_argv(run, chunk))
             return
         run.seed_future = None
-        if future.status in ("finished", "lost") and run.seeds.is_file():
+        if future.status in ("finished", "lost") and run.seeded:
             self._submit_chunks(runner, run)
             return
         try:
             reason = failure_text(future.exception(timeout=5)) if future.status == "error" else \
-                f"it ended without writing {run.seeds}" if future.status == "finished" else future.status
+                f"it ended without writing {run.seeds[-1]}" if future.status == "finished" else future.status
         except Exception as exc:  # noqa: BLE001  (the reason is reported, whatever it is)
             reason = f"{type(exc).__name__}: {exc}"
         run.fail(f"seed pass: {reason}")
@@ -461,7 +460,8 @@ class Batch:
             saved = json.loads((out / STITCHED_FILE).read_text())
         except (OSError, ValueError):
             return False
-        return (out / "report.json").is_file() and (out / "joints.npz").is_file() \
+        results = [out if part is None else out / ACTORS_FOLDER / part for part in run.actor_folders]
+        return (out / "report.json").is_file() and all((r / "joints.npz").is_file() for r in results) \
             and saved == self.stitch_signature(run)
 
     def cancel(self):
@@ -513,73 +513,90 @@ class Batch:
 
 def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
     """Fit the actor of each take that calibrates (`calibrate = true`, or by default a take of at least DEFAULT_FRAMES
-    frames without an `actor`) on its first frames: one `calibrate` command per take, all submitted to the cluster at
-    once before any chunk is planned (the chunks track with the fit), written on the shared storage
-    (CHUNKS/<take>/actor/) and copied to DIR/<take>/actor.json; a rerun reuses a fit already there. Returns {take
-    name: reason} for the takes whose fit failed, or None when the batch was cancelled meanwhile."""
+    frames without an `actor`) on its first frames: one `calibrate` command per actor (each of a take of several, as
+    `track` fits them), all submitted to the cluster at once before any chunk is planned (the chunks track with the
+    fit), written on the shared storage (CHUNKS/<take>/actor/, or CHUNKS/<take>/actors/<armature>/) and kept beside
+    the take's result; a rerun reuses a fit already there. Returns {take name: reason} for the takes
+    whose fit failed, or None when the batch was cancelled meanwhile."""
     from ..core.actor.frames import DEFAULT_FRAMES
     from ..core.batch.cluster import failure_text
 
     pending = {}
     for take in takes:
-        if take.actor is not None or take.calibrate is False or take.several:  # a cast's `track` fits each actor
+        if take.actor is not None or take.calibrate is False:
             continue
         if take.calibrate is None and take.n_frames < DEFAULT_FRAMES:
             continue
-        shared = chunks_root / take.name / "actor"
-        take.actor = shared / "actor.json"
-        if take.actor.is_file():
-            _keep_in_result(take, out)
-            continue
         first, last = take.frames[0], min(take.frames[1], take.frames[0] + DEFAULT_FRAMES - 1)
-        argv = [*command, "calibrate", "--scene", mapped(take.scene), "--capture", mapped(take.capture),
-                "--out", mapped(shared), "--frames", f"{first}-{last}"]
-        argv += (["--armature", take.armature] if take.armature else []) + option_args(take.choices)
-        for length in take.measured_of(take.armature):  # as `calibrate --measured` takes them
-            argv += ["--measured", length]
-        print(f"batch: take {take.name!r}: calibrating the actor on frames {first}-{last}", file=sys.stderr,
-              flush=True)
-        pending[take.name] = (take, runner.submit(f"{take.name}-calibrate", argv, check=False))
+        for name in take.names:
+            shared = chunks_root / take.name / (Path(ACTORS_FOLDER) / actor_folder_name(name) if take.several
+                                                else "actor")
+            fit = shared / "actor.json"
+            if fit.is_file():
+                _keep_fit(take, name, fit, out)
+                continue
+            argv = [*command, "calibrate", "--scene", mapped(take.scene), "--capture", mapped(take.capture),
+                    "--out", mapped(shared), "--frames", f"{first}-{last}"]
+            argv += (["--armature", name] if name else []) + option_args(take.choices)
+            for length in take.measured_of(name):  # as `calibrate --measured` takes them
+                argv += ["--measured", length]
+            whose = f" {name}" if take.several else ""
+            print(f"batch: take {take.name!r}: calibrating the actor{whose} on frames {first}-{last}",
+                  file=sys.stderr, flush=True)
+            pending[(take.name, name)] = (take, fit, runner.submit(f"{take.name}-calibrate{whose.replace(' ', '-')}",
+                                                                   argv, check=False))
     failed = {}
     while pending:
         if cancel_requested(out):
             return None
-        for name, (take, future) in list(pending.items()):
+        for (take_name, name), (take, fit, future) in list(pending.items()):
             if future.status == "pending":
                 continue
-            del pending[name]
+            del pending[(take_name, name)]
             try:
                 done = future.result(timeout=5)
             except Exception as exc:  # noqa: BLE001  (the worker's failure is the take's reason)
                 done = exc
-            if getattr(done, "returncode", 1) != 0 or not take.actor.is_file():
-                failed[name] = f"actor calibration: {failure_text(done)}"
-                take.actor = None
+            whose = f" {name}" if take.several else ""
+            if getattr(done, "returncode", 1) != 0 or not fit.is_file():
+                failed.setdefault(take_name, f"actor{whose} calibration: {failure_text(done)}")
                 continue
-            print(f"batch: take {name!r}: actor calibrated", file=sys.stderr, flush=True)
-            _keep_in_result(take, out)
+            print(f"batch: take {take_name!r}: actor{whose} calibrated", file=sys.stderr, flush=True)
+            _keep_fit(take, name, fit, out)
         if pending:
             time.sleep(POLL_SECONDS)
+    for take in takes:
+        if take.name in failed:
+            take.actor, take.fitted = None, {}
     return failed
 
 
-def _keep_in_result(take, out):
-    """DIR/<take>/actor.json: the fit beside the take's result, where Blender's Track reads it to key the take."""
+def _keep_fit(take, name, fit, out):
+    """Track the take's actor `name` with the fit, and keep it beside the take's result from now on (DIR/<take>/, or
+    its actors/<armature>/), where Blender's Track reads it to key the take (the stitch writes it there too)."""
     from ..core.actor.actor_file import load_actor, write_actor
 
-    (out / take.name).mkdir(parents=True, exist_ok=True)
-    write_actor(out / take.name / "actor.json", load_actor(take.actor))
+    if take.several:
+        take.fitted[name] = fit
+        result = out / take.name / ACTORS_FOLDER / actor_folder_name(name)
+    else:
+        take.actor = fit
+        result = out / take.name
+    result.mkdir(parents=True, exist_ok=True)
+    write_actor(result / "actor.json", load_actor(fit))
 
 
-def cast_run(batch, take, chunks_root):
-    """The batch's run of a take of several actors: its work folder keyed by what decides the poses."""
+def take_key(take):
+    """The take's chunk key, as its chunk commands compute it from their arguments (track-chunk's take_inputs)."""
+    from ..core.actor.actor_file import load_actor
     from ..core.batch.chunk_folder import chunk_key
-    from .batch_cast import CastRun, cast_argv, cast_work_folder
 
-    key = chunk_key(take.settings().to_dict(), take.scene, list(take.armatures),
-                    {"calibrate": take.calibrate, "measured": list(take.measured)}, take.capture)
-    work = cast_work_folder(chunks_root, take, key)
-    return CastRun(take, work, cast_argv(batch.worker_command, take, work, batch.mapped, batch.args))
+    settings = take.settings().to_dict()
+    if not take.several:
+        actor = load_actor(take.actor) if take.actor is not None else None
+        return chunk_key(settings, take.scene, take.armature, actor, take.capture)
+    fits = [load_actor(take.fitted[n]) if n in take.fitted else None for n in take.names]
+    return chunk_key(settings, take.scene, take.names, fits, take.capture)
 
 
 def _choices_of(args):
@@ -587,8 +604,7 @@ def _choices_of(args):
 
 
 def run(args):
-    from ..core.actor.actor_file import load_actor
-    from ..core.batch.chunk_folder import CHUNKS_FOLDER, ChunkFolder, chunk_key
+    from ..core.batch.chunk_folder import CHUNKS_FOLDER, ChunkFolder
     from ..core.batch.cluster import ChunkRunner, chunk_environment
     from ..core.batch.plan import plan_chunks
     from ..core.batch.seed import seeds_path
@@ -618,8 +634,6 @@ def run(args):
                                         "its measured lengths out")
         plans = {}
         for take in takes:  # every take's plan checked before anything runs
-            if take.several:  # tracked whole (operators/batch_cast.py)
-                continue
             try:
                 plans[take.name] = plan_chunks(take.frames[0], take.frames[1], args.chunk_frames, args.warmup,
                                                args.overlap)
@@ -645,14 +659,12 @@ def run(args):
                 batch.cancel()
                 return EXIT_CANCELLED
             for take in takes:
-                if take.several:
-                    batch.runs.append(cast_run(batch, take, chunks_root))
-                    continue
                 plan = plans[take.name]
-                actor = load_actor(take.actor) if take.actor is not None else None
-                key = chunk_key(take.settings().to_dict(), take.scene, take.armature, actor, take.capture)
+                key = take_key(take)
+                parts = [actor_folder_name(n) for n in take.names] if take.several else [None]
                 batch.runs.append(TakeRun(take, plan, [ChunkFolder(chunks_root, take.name, c.track, key) for c in plan],
-                                          seeds_path(chunks_root, take.name, *take.frames, key)))
+                                          [seeds_path(chunks_root, take.name, *take.frames, key, p) for p in parts],
+                                          parts))
                 if take.name in uncalibrated:  # fails alone; the other takes go on
                     batch.runs[-1].fail(uncalibrated[take.name])
             batch.frames_at_start = sum(r.frames_done() for r in batch.runs)

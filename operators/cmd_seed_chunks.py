@@ -1,12 +1,13 @@
 """`seed-chunks`: follow a take's person from its first frame with the landmarks alone, so that every chunk that
 starts later starts around the person, not where the subject was placed (core/batch/seed.py). One per take, before
-its chunks after the first; finished once, never again."""
+its chunks after the first; finished once, never again. A take of several actors follows them all together, each
+into a seeds file of its own."""
 import shutil
 import sys
 
 from .cmd_plan_chunks import add_chunk_arguments
-from .cmd_track import StepPrinter, open_subject, parse_frames
-from .cmd_track_chunk import add_take_arguments, take_inputs
+from .cmd_track import open_subject, parse_frames
+from .cmd_track_chunk import add_take_arguments, sessions_of, take_inputs, take_session
 
 
 def add_arguments(p):
@@ -15,43 +16,50 @@ def add_arguments(p):
 
 
 def run(args):
-    from ..addon.scene_bridge import find_armature
     from ..core.batch.plan import plan_chunks
-    from ..core.batch.seed import follow_landmarks, seed_frames, seeds_path, so_far_path, write_seeds
+    from ..core.batch.seed import follow_actors, seed_frames, seeds_path, so_far_path, write_seeds
     from .backend_choice import choose_backend
     from .failures import USER_ERRORS, cli_failure
-    from .track_session import TrackSession
 
     frames = parse_frames(args.frames)
     work = None
     try:
-        settings, actor, key = take_inputs(args)
+        settings, actors, key = take_inputs(args)
         plan = plan_chunks(frames[0], frames[-1], args.chunk_frames, args.warmup, args.overlap)
-        path = seeds_path(args.chunks, args.take, frames[0], frames[-1], key)
-        if path.is_file():
-            print(path)
+        paths = [seeds_path(args.chunks, args.take, frames[0], frames[-1], key, part) for part in actors.folders]
+        if all(path.is_file() for path in paths):
+            print("\n".join(map(str, paths)))
             return 0
         visit = seed_frames(frames[0], [c.track[0] for c in plan])
         scene = open_subject(args.scene)
-        armature = find_armature(scene, args.armature)
         backend = choose_backend(args.backend).used
-        work = path.with_name(f".{path.stem}.work")  # TrackSession's result folder, unused: removed after
-        session = TrackSession(scene, armature, args.capture, work, take_inputs(args, backend)[0], frames=frames,
-                               log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), actor=actor, smooth_hz=0)
-        tracker = session.prepare()
+        work = paths[0].with_name(f".{paths[0].stem}.work")  # the sessions' result folder, unused: removed after
+        session = take_session(scene, actors, args.capture, work, take_inputs(args, backend)[0], frames, smooth_hz=0)
+        each = sessions_of(session)
+        trackers = [s.prepare() for s in each]
+
+        def write(paths_of, followed, poses, fitted):
+            for path, p, f in zip(paths_of, poses, fitted):
+                write_seeds(path, followed, p, f)
+
         try:
-            followed = follow_landmarks(tracker, visit, session.rough_pose, progress=lambda i, n, f: print(
-                f"seeds of {args.take}: frame {f} ({i} of {n})", file=sys.stderr, flush=True),
-                starts=[c.track[0] for c in plan], reached=lambda *so_far: write_seeds(so_far_path(path), *so_far))
+            followed, poses, fitted = follow_actors(
+                trackers, visit, [s.rough_pose for s in each], progress=lambda i, n, f: print(
+                    f"seeds of {args.take}: frame {f} ({i} of {n})", file=sys.stderr, flush=True),
+                starts=[c.track[0] for c in plan],
+                reached=lambda *so_far: write([so_far_path(p) for p in paths], *so_far))
         finally:
-            tracker.finish_prefetch()
-        write_seeds(path, *followed)
-        so_far_path(path).unlink(missing_ok=True)
+            for tracker in trackers:
+                tracker.finish_prefetch()
+        write(paths, followed, poses, fitted)
+        for path in paths:
+            so_far_path(path).unlink(missing_ok=True)
     except USER_ERRORS as exc:
         return cli_failure("seed-chunks", exc)
     finally:
         if work is not None:
             shutil.rmtree(work, ignore_errors=True)
-    print(f"followed {len(visit)} frames, {int(followed[2].sum())} placed by the landmarks", file=sys.stderr)
-    print(path)
+    placed = ", ".join(str(int(f.sum())) for f in fitted)
+    print(f"followed {len(visit)} frames, {placed} placed by the landmarks", file=sys.stderr)
+    print("\n".join(map(str, paths)))
     return 0

@@ -3,15 +3,16 @@
 The chunks are found again from the take's plan and settings (the chunk folders' names); their kept frames are
 cross-faded over each overlap (core/batch/stitch.py), then the take is smoothed, keyed and exported by the same
 TrackSession `track` uses. report.json gains a "batch" section: the plan, each chunk's folder and time, and per
-overlap how far the two chunks disagreed.
+overlap how far the two chunks disagreed. A take of several actors is stitched actor by actor and finished as
+`track` finishes several (OUT/actors/<armature>/, one tracked.blend, overlays of all).
 """
 import sys
 from pathlib import Path
 
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
-from .cmd_track import StepPrinter, add_foot_lock_options, finish_and_list, open_subject, parse_frames
-from .cmd_track_chunk import add_take_arguments, take_inputs
+from .cmd_track import add_foot_lock_options, finish_and_list, open_subject, parse_frames
+from .cmd_track_chunk import add_take_arguments, sessions_of, take_inputs, take_session
 
 
 def add_arguments(p):
@@ -31,18 +32,17 @@ def missing_chunks(folders):
 
 
 def run(args):
-    from ..addon.scene_bridge import find_armature
+    from ..core.actor.actor_file import write_actor
     from ..core.batch.chunk_folder import ChunkError, ChunkFolder
     from ..core.batch.plan import plan_chunks, plan_to_json
     from ..core.batch.stitch import stitch
     from ..core.batch.stitch_report import per_frame_facts
     from ..core.results.views_without_landmarks import views_without_landmarks_message
     from .failures import USER_ERRORS, cli_failure
-    from .track_session import TrackSession
 
     frames = parse_frames(args.frames)
     try:
-        settings, actor, key = take_inputs(args)
+        settings, actors, key = take_inputs(args)
         plan = plan_chunks(frames[0], frames[-1], args.chunk_frames, args.warmup, args.overlap)
         folders = [ChunkFolder(args.chunks, args.take, c.track, key) for c in plan]
         missing = missing_chunks(folders)
@@ -56,34 +56,37 @@ def run(args):
             raise ChunkError(f"take {args.take!r}: chunks {', '.join(unseeded)} started from the subject's placement, "
                              "not from the take's seeds (core/batch/seed.py): delete their folders, run seed-chunks, "
                              "then track them again")
-        estimates = [f.estimates() for f in folders]
-        facts = per_frame_facts(plan, [f.report() for f in folders])
+        estimates = [[f.estimates(part) for f in folders] for part in actors.folders]
+        facts = [per_frame_facts(plan, [f.report(part) for f in folders]) for part in actors.folders]
         scene = open_subject(args.scene)
-        armature = find_armature(scene, args.armature)
-        session = TrackSession(scene, armature, args.capture, args.out, settings, frames=frames,
-                               log=lambda m: print(m, file=sys.stderr), step=StepPrinter(), actor=actor,
-                               smooth_hz=args.smooth, foot_lock=args.foot_lock, foot_lock_speed=args.foot_lock_speed)
-        stitched, overlaps = stitch(session.body, plan, estimates)
+        session = take_session(scene, actors, args.capture, args.out, settings, frames, smooth_hz=args.smooth,
+                               foot_lock=args.foot_lock, foot_lock_speed=args.foot_lock_speed)
+        stitched = [stitch(each.body, plan, mine) for each, mine in zip(sessions_of(session), estimates)]
     except USER_ERRORS as exc:
         return cli_failure("stitch", exc)
-    writer = session.writer
-    writer.estimates = stitched
-    writer.info["backend"] = sorted({i.get("backend") for i in infos if i.get("backend")})
-    writer.info["batch"] = {
-        **plan_to_json(frames[0], frames[-1], args.chunk_frames, args.warmup, args.overlap),
-        "chunk_folders": [str(f.path) for f in folders],
-        "chunk_hosts": [i.get("host") for i in infos],
-        "overlaps": overlaps,
-        "overlap_mean_joint_mm": _mean([o["mean_joint_mm"] for o in overlaps]),
-        "note": "per frame, 'seconds' is the time of the chunk the frame was kept from; the overlaps' "
-                "mean_joint_mm: the 15 joints' mean distance between the two chunks' solved poses there"}
-    writer.info.update(facts)
-    writer.write()
+    for each, (poses, overlaps), mine, fit in zip(sessions_of(session), stitched, facts, actors.calibrations):
+        writer = each.writer
+        if fit is not None:  # beside the take, where Blender's Track reads the build to key it with
+            write_actor(writer.out / "actor.json", fit)
+        writer.estimates = poses
+        writer.info["backend"] = sorted({i.get("backend") for i in infos if i.get("backend")})
+        writer.info["batch"] = {
+            **plan_to_json(frames[0], frames[-1], args.chunk_frames, args.warmup, args.overlap),
+            "chunk_folders": [str(f.path) for f in folders],
+            "chunk_hosts": [i.get("host") for i in infos],
+            "overlaps": overlaps,
+            "overlap_mean_joint_mm": _mean([o["mean_joint_mm"] for o in overlaps]),
+            "note": "per frame, 'seconds' is the time of the chunk the frame was kept from; the overlaps' "
+                    "mean_joint_mm: the 15 joints' mean distance between the two chunks' solved poses there"}
+        writer.info.update(mine)
+        writer.write()
     session.key_all()
-    finish_and_list(session, args, f"stitched {len(plan)} chunks, {len(stitched)} frames")
-    said = views_without_landmarks_message(writer.info)
-    if said:
-        print(said, file=sys.stderr)
+    actors_said = f" of {len(actors.names)} actors" if actors.several else ""
+    finish_and_list(session, args, f"stitched {len(plan)} chunks, {len(stitched[0][0])} frames{actors_said}")
+    for each in sessions_of(session):
+        said = views_without_landmarks_message(each.writer.info, actors=len(actors.names))
+        if said:
+            print(f"{each.armature.name}: {said}" if actors.several else said, file=sys.stderr)
     return 0
 
 

@@ -304,7 +304,8 @@ def solve_all(session, out, stop_with_parent=False):
 def run_cast(args, scene, names, choice):
     """`track` with several --armature: every actor in one frame loop (operators/cast_session.py)."""
     from ..addon.scene_bridge import find_armature
-    from .cast_session import ACTORS_FOLDER, CastSession, cast_folders
+    from ..core.results.result_folder import ACTORS_FOLDER
+    from .cast_session import CastSession, cast_folders
     from .failures import USER_ERRORS, cli_failure
 
     try:

@@ -334,7 +334,7 @@ def finish(scene, run, progress):
 
 def _key_each(scene, run, result):
     """Key the result on the armature, or each actor's (result/actors/<name>/) on its own; the frames keyed."""
-    from .cast_session import ACTORS_FOLDER, actor_folder_name
+    from ..core.results.result_folder import ACTORS_FOLDER, actor_folder_name
 
     targets = [(name, result / ACTORS_FOLDER / actor_folder_name(name)) for name in run.cast] or \
         [(run.armature_name, result)]

@@ -66,3 +66,11 @@ def test_the_seed_pass_visits_every_stride_and_each_chunk_start(tmp_path):
     write_seeds(path, np.array(visit), poses, np.ones(len(visit), bool))
     assert np.array_equal(find_seed(tmp_path, "take", "abc", 165), poses[visit.index(165)])
     assert find_seed(tmp_path, "take", "abc", 166) is None and find_seed(tmp_path, "take", "other", 165) is None
+    # several actors: a file each, and no actor's pose is read for another's (nor for the take of one)
+    for sign, actor in ((-1.0, "Lead"), (2.0, "Partner")):
+        write_seeds(seeds_path(tmp_path, "take", 100, 400, "abc", actor), np.array(visit), sign * poses,
+                    np.ones(len(visit), bool))
+    assert np.array_equal(find_seed(tmp_path, "take", "abc", 165, "Lead"), -poses[visit.index(165)])
+    assert np.array_equal(find_seed(tmp_path, "take", "abc", 165, "Partner"), 2 * poses[visit.index(165)])
+    assert np.array_equal(find_seed(tmp_path, "take", "abc", 165), poses[visit.index(165)])
+    assert find_seed(tmp_path, "take", "abc", 165, "Nobody") is None

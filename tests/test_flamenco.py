@@ -50,7 +50,7 @@ JOBS = [
      "armature": "Rig", "actor": "/farm/actors/anna.json", "runner": "python"},
     {"blendfile": "/farm/s.blend", "capture": "/farm/c", "output_root": "/farm/out", "frames": "7"},
 ]
-# several actors: the take whole in one `track` task
+# several actors: each one's build fitted, then the chunks and the stitch with every armature
 CAST_JOB = {"blendfile": "/farm/duet.blend", "capture": "/farm/captures/duet", "output_root": "/farm/results",
             "frames": "0-899", "armature": "Lead, Partner", "seed": 1, "smooth": 6, "runner": "python"}
 
@@ -170,8 +170,8 @@ def test_each_task_runs_the_chunk_command_the_python_plan_names(compiled, index)
         assert args.frames == f"{chunk.track[0]}-{chunk.track[1]}"
         assert (args.scene, args.capture, args.take, args.chunks) == (
             Path(settings["blendfile"]), Path(settings["capture"]), take, out_root / "_chunks")
-        assert args.armature == settings.get("armature")
-        assert args.actor == (Path(settings["actor"]) if "actor" in settings else None)
+        assert args.armature == ([settings["armature"]] if "armature" in settings else None)
+        assert args.actor == ([settings["actor"]] if "actor" in settings else None)
         for name, value in chosen.items():
             assert getattr(args, name) == value, name
         parsed_settings.append(settings_from_args(args).to_dict())
@@ -185,16 +185,31 @@ def test_each_task_runs_the_chunk_command_the_python_plan_names(compiled, index)
     assert args.out == out_root / take and args.chunks == out_root / "_chunks"
     assert args.smooth == settings.get("smooth", DEFAULT_CUTOFF_HZ)
     assert (args.scene, args.capture, args.take, args.armature) == (
-        Path(settings["blendfile"]), Path(settings["capture"]), take, settings.get("armature"))
+        Path(settings["blendfile"]), Path(settings["capture"]), take,
+        [settings["armature"]] if "armature" in settings else None)
     # the stitch finds the chunk folders by the same settings (their folder names hash them)
     assert all(s == settings_from_args(args).to_dict() for s in parsed_settings)
 
 
-def test_a_job_of_several_actors_tracks_the_take_whole_in_one_task(compiled):
-    (task,) = compiled["jobs"][len(JOBS)]
-    assert task["name"] == "track-duet" and task["type"] == "mocap" and task["depends_on"] == []
-    runner, args = _parse(task)
-    assert (runner, args.command, args.frames, args.armature) == ("python", "track", "0-899", ["Lead", "Partner"])
-    assert (args.scene, args.capture, args.out) == (Path("/farm/duet.blend"), Path("/farm/captures/duet"),
-                                                    Path("/farm/results/duet"))
-    assert args.resume and args.smooth == 6 and args.seed == 1
+def test_a_job_of_several_actors_fits_each_build_then_tracks_every_actor_in_each_chunk(compiled):
+    """The commands parse with the real command line: each actor's `calibrate` writes where the chunk commands read
+    it (--actor NAME=FILE), and every chunk command names every armature, as `batch` runs a take of several."""
+    from markerless_mocap.core.actor.frames import DEFAULT_FRAMES
+    from markerless_mocap.core.actor.per_actor import options_of
+
+    tasks = compiled["jobs"][len(JOBS)]
+    fits = {t["name"]: _parse(t)[1] for t in tasks if t["name"].startswith("calibrate-")}
+    assert sorted(fits) == ["calibrate-duet-Lead", "calibrate-duet-Partner"]
+    for name in ("Lead", "Partner"):
+        args = fits[f"calibrate-duet-{name}"]
+        assert (args.command, args.armature, args.frames) == ("calibrate", name, f"0-{DEFAULT_FRAMES - 1}")
+        assert args.seed == 1
+    tracked = [t for t in tasks if not t["name"].startswith("calibrate-")]
+    assert [t["name"] for t in tracked][0] == "seeds-duet" and tracked[-1]["name"] == "stitch-duet"
+    assert len(tracked) == len(plan_chunks(0, 899, DEFAULT_CHUNK_FRAMES, DEFAULT_WARMUP, DEFAULT_OVERLAP)) + 2
+    for task in tracked:
+        runner, args = _parse(task)
+        assert runner == "python" and args.armature == ["Lead", "Partner"], task["name"]
+        for name in ("Lead", "Partner"):  # the fit `calibrate` wrote, read as track-chunk reads it
+            assert options_of(args, name)[0] == fits[f"calibrate-duet-{name}"].out / "actor.json"
+    assert sorted(tracked[0]["depends_on"]) == sorted(fits)

@@ -2,6 +2,8 @@
 
     CHUNKS/<take>/<first:06d>-<last:06d>_<key>/   joints.npz poses.npz keypoints.npz report.json checkpoint.npz
                                                   chunk.json (what was tracked, with what, where, when)
+                                                  (a take of several actors: report.json and chunk.json, and
+                                                  actors/<armature>/ with each actor's files, as `track` writes them)
 
 `<key>` is 12 hex digits of a SHA-256 over what decides the chunk's poses: the tracking settings (the backend left
 out: each scores the same energy), the subject file's bytes, the armature's name, the actor calibration and the
@@ -22,6 +24,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from ..results.result_folder import ACTORS_FOLDER
 from ..tracking import checkpoint
 from .plan import frame_range_name
 
@@ -109,21 +112,30 @@ class ChunkFolder:
             raise ChunkError(f"chunk {self.path}: {INFO_FILE} cannot be read ({exc}); delete the folder and run "
                              "the chunk again") from None
 
-    def report(self):
-        """The chunk's report.json as a dict ({} when it has none: chunks tracked before it was kept)."""
+    def _result(self, actor):
+        """The chunk's result folder: its own, or one of several actors' (`actor`: that actor's folder name)."""
+        return self.path if actor is None else self.path / ACTORS_FOLDER / actor
+
+    def report(self, actor=None):
+        """The chunk's (or its `actor`'s) report.json as a dict ({} when it has none: chunks tracked before it was
+        kept)."""
         try:
-            return json.loads((self.path / REPORT_FILE).read_text())
+            return json.loads((self._result(actor) / REPORT_FILE).read_text())
         except FileNotFoundError:
             return {}
         except (OSError, ValueError) as exc:
             raise ChunkError(f"chunk {self.path}: {REPORT_FILE} cannot be read ({exc}); delete the folder and run "
                              "the chunk again") from None
 
-    def estimates(self):
-        """{frame: FrameEstimate} of the finished chunk."""
+    def estimates(self, actor=None):
+        """{frame: FrameEstimate} of the finished chunk (of its `actor`, by folder name, in a take of several)."""
         if not self.done:
             raise ChunkError(f"chunk {self.path} is not finished: run its track-chunk command (or the batch) first")
-        estimates, _state, _settings = checkpoint.read(self.path / checkpoint.FILE_NAME)
+        path = self._result(actor) / checkpoint.FILE_NAME
+        if not path.is_file():
+            raise ChunkError(f"chunk {self.path} holds no {path.relative_to(self.path)}: it was tracked for other "
+                             "actors; delete the folder and run the chunk again")
+        estimates, _state, _settings = checkpoint.read(path)
         return {int(e.frame): e for e in estimates}
 
 

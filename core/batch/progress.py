@@ -21,10 +21,13 @@ CANCEL_FILE = "batch-cancel"  # its presence asks a running batch to stop
 
 
 def frames_solved(result_folder):
-    """Frames a result folder being tracked has solved so far (its report.json, rewritten as frames are solved);
-    0 while it has none, or cannot be read."""
+    """Frames a result folder being tracked has solved so far (its report.json, rewritten as frames are solved; for
+    several actors, the frames every actor has solved); 0 while it has none, or cannot be read."""
     try:
-        return int(json.loads((Path(result_folder) / "report.json").read_text())["totals"]["frames"])
+        report = json.loads((Path(result_folder) / "report.json").read_text())
+        if "actors" in report:
+            return min((frames_solved(Path(result_folder) / a["folder"]) for a in report["actors"]), default=0)
+        return int(report["totals"]["frames"])
     except (OSError, ValueError, KeyError, TypeError):
         return 0
 

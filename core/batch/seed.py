@@ -12,6 +12,7 @@ landmarks, then ISA) around the pass's pose at its first frame instead of the pl
     CHUNKS/<take>/seeds-<F0:06d>-<F1:06d>_<key>.npz   frames (S,), poses (S,D), fitted (S,) bool
     CHUNKS/<take>/seeds-<F0:06d>-<F1:06d>_<key>.so-far.npz   the same up to the last chunk start reached, while the
                                                            pass runs: each chunk may start as soon as its frame is in
+    CHUNKS/<take>/seeds-<F0:06d>-<F1:06d>_<key>.<actor>.npz  per actor of a take of several, all followed together
 """
 from __future__ import annotations
 
@@ -41,28 +42,50 @@ def follow_landmarks(tracker, frames, placement, progress=None, starts=(), reach
     itself: a chunk that starts there starts as `track` does. Where the landmarks do not place the body, the last
     pose is carried on. `reached(frames, poses, fitted)` is called with what is followed so far at each of `starts`
     (the chunks' first frames), so their chunks can begin before the pass ends."""
+    said = None if reached is None else (lambda f, poses, fitted: reached(f, poses[0], fitted[0]))
+    followed, poses, fitted = follow_actors([tracker], frames, [placement], progress, starts, said)
+    return followed, poses[0], fitted[0]
+
+
+def follow_actors(trackers, frames, placements, progress=None, starts=(), reached=None):
+    """follow_landmarks for several actors at once, one tracker and placement each: (frames, [poses (S,D)],
+    [fitted (S,)]) in the trackers' order. At each frame every actor is fitted in turn with the others' bodies set
+    apart where they were just followed (core/tracking/other_actors.py), so a landmark of the person beside it is
+    not taken for its own."""
+    from ..tracking.other_actors import OtherActor, OtherActors
+
     starts = {int(s) for s in starts}
-    body = tracker.body
-    guide = np.asarray(placement, dtype=np.float64)
-    tracker.energy.set_reference_pose(default_pose_at(body, guide))
-    poses, fitted = [guide.copy()], [False]
+    guides = [np.asarray(p, dtype=np.float64) for p in placements]
+    for tracker, guide in zip(trackers, guides):
+        tracker.energy.set_reference_pose(default_pose_at(tracker.body, guide))
+    poses, fitted = [[g.copy()] for g in guides], [[False] for _ in guides]
     for i, frame in enumerate(frames[1:], 1):
-        tracker.load_frame(frame, guide)
-        pose, _fit = keypoint_start(body, tracker.capture.cameras, tracker.energy, guide)
-        if pose is not None:
-            guide = np.asarray(pose, dtype=np.float64)
-        poses.append(guide.copy())
-        fitted.append(pose is not None)
+        for a, tracker in enumerate(trackers):
+            if len(trackers) > 1:
+                tracker.set_others(OtherActors([OtherActor(t.body, t.proxy, guides[b], t.energy.rig_points)
+                                                for b, t in enumerate(trackers) if b != a]))
+            tracker.load_frame(frame, guides[a])
+            pose, _fit = keypoint_start(tracker.body, tracker.capture.cameras, tracker.energy, guides[a])
+            if pose is not None:
+                guides[a] = np.asarray(pose, dtype=np.float64)
+            poses[a].append(guides[a].copy())
+            fitted[a].append(pose is not None)
         if progress is not None:
             progress(i, len(frames) - 1, frame)
         if reached is not None and int(frame) in starts:
-            reached(np.asarray(frames[:i + 1], dtype=np.int64), np.array(poses), np.array(fitted))
-    return np.asarray(frames, dtype=np.int64), np.array(poses), np.array(fitted)
+            reached(np.asarray(frames[:i + 1], dtype=np.int64), [np.array(p) for p in poses],
+                    [np.array(f) for f in fitted])
+    return np.asarray(frames, dtype=np.int64), [np.array(p) for p in poses], [np.array(f) for f in fitted]
 
 
-def seeds_path(chunks_root, take, first, last, key):
-    """The finished pass's file; while it runs, what it has followed so far is in so_far_path(...)."""
-    return Path(chunks_root) / take / f"seeds-{frame_range_name(first, last)}_{key}.npz"
+def seeds_path(chunks_root, take, first, last, key, actor=None):
+    """The finished pass's file (`actor`: the folder name of one of several actors, each followed into a file of
+    its own); while it runs, what it has followed so far is in so_far_path(...)."""
+    return Path(chunks_root) / take / f"seeds-{frame_range_name(first, last)}_{key}{_actor_suffix(actor)}.npz"
+
+
+def _actor_suffix(actor):
+    return "" if actor is None else f".{actor}"
 
 
 def so_far_path(path):
@@ -77,17 +100,21 @@ def write_seeds(path, frames, poses, fitted):
     return path
 
 
-def find_seed(chunks_root, take, key, frame):
-    """The followed pose at `frame` from a seeds file of this take and key, or None when none holds that frame."""
-    for path in sorted((Path(chunks_root) / take).glob(f"seeds-*_{key}*.npz")):  # finished, then so far
-        try:
-            with np.load(path) as data:
-                hit = np.nonzero(data["frames"] == int(frame))[0]
-                if hit.size:
-                    return data["poses"][hit[0]].copy()
-        except (OSError, ValueError, KeyError):
-            continue
+def find_seed(chunks_root, take, key, frame, actor=None):
+    """The followed pose at `frame` from a seeds file of this take, key and actor, or None when none holds that
+    frame."""
+    mine = f"_{key}{_actor_suffix(actor)}"
+    for pattern in (f"seeds-*{mine}.npz", f"seeds-*{mine}.so-far.npz"):  # finished, then so far
+        for path in sorted((Path(chunks_root) / take).glob(pattern)):
+            try:
+                with np.load(path) as data:
+                    hit = np.nonzero(data["frames"] == int(frame))[0]
+                    if hit.size:
+                        return data["poses"][hit[0]].copy()
+            except (OSError, ValueError, KeyError):
+                continue
     return None
 
 
-__all__ = ["SEED_STRIDE", "find_seed", "follow_landmarks", "seed_frames", "seeds_path", "so_far_path", "write_seeds"]
+__all__ = ["SEED_STRIDE", "find_seed", "follow_actors", "follow_landmarks", "seed_frames", "seeds_path", "so_far_path",
+           "write_seeds"]

@@ -6,8 +6,8 @@
     scene = "subjects/anna.blend"   the subject; relative paths are relative to the TOML file's folder
     capture = "captures/walk01"
     frames = "0-599"                optional: "A-B" inclusive or [A, B]; default every frame
-    armature = "Armature"           optional; a list (["Lead", "Partner"]) tracks several actors at once: the take
-                                    runs whole on one worker (`track` with each --armature), not in chunks
+    armature = "Armature"           optional; a list (["Lead", "Partner"]) tracks several actors at once, in chunks
+                                    as one actor's take (each chunk tracks them together, as `track` does)
     actor = "anna/actor.json"       optional: an actor calibration to track with
     calibrate = false               optional: track with the rig's proportions; by default a take of at least
                                     20 frames without `actor` is tracked with the actor's, fitted on its first frames
@@ -56,10 +56,16 @@ class Take:
     calibrate: bool | None = None
     armatures: tuple = ()  # several actors tracked at once (then `armature` is None)
     measured: tuple = ()  # "[ARMATURE:]SEGMENT=METRES" for the actor fit, as `track --calibrate-measured` takes them
+    fitted: dict = field(default_factory=dict)  # several actors: armature -> the actor.json the batch fitted
 
     @property
     def several(self):
         return len(self.armatures) > 1
+
+    @property
+    def names(self):
+        """The armatures tracked: several, the one named, or [None] for the scene's only one."""
+        return list(self.armatures) if self.several else [self.armature]
 
     def measured_of(self, name):
         """The SEGMENT=METRES lengths of actor `name` (None: the take's one actor), read from `measured` as `track

@@ -16,6 +16,7 @@ any reason keeps what it solved, and `--resume` continues from the checkpoint ex
 import errno
 import json
 import platform
+import re
 import tempfile
 import time
 from pathlib import Path
@@ -24,6 +25,16 @@ import numpy as np
 
 from ..atomic_files import atomic_path
 from ..tracking import checkpoint
+
+
+# Several actors tracked together: one folder in the layout above per armature, OUT/actors/<armature>/
+# (docs/several-actors.md).
+ACTORS_FOLDER = "actors"
+
+
+def actor_folder_name(name):
+    """A folder name for an armature's name (characters a file system may refuse replaced by _)."""
+    return re.sub(r'[<>:"/\\|?*\x00-\x1f]', "_", name).strip(" .") or "armature"
 
 
 class ResultWriteError(OSError):

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 //
 // Flamenco job type "Markerless Mocap": one take tracked in chunks on the farm's workers, then stitched (a take of
-// several actors, whose armatures the job names: one task tracking it whole).
+// several actors, whose armatures the job names, too: each actor's build fitted first, each chunk tracking them all).
 //
 // Each chunk is an `exec` task running `markerless_mocap track-chunk` (the command `batch` runs on a Dask
 // worker), the chunks after the first after a `seed-chunks` task (where each starts); a last task runs
@@ -37,7 +37,7 @@ const JOB_TYPE = {
           description: "Low-pass the stitched take at this many Hz (0: keep the poses as solved)" },
         { key: "armature", type: "string", required: false,
           description: "Armature to track if the subject has several (empty: its only one); several, separated by " +
-                       "commas, track those actors at once: the take whole in one task, not in chunks" },
+                       "commas, track those actors at once, each one's build fitted on the take first" },
         { key: "actor", type: "string", subtype: "file_path", required: false,
           description: "Actor calibration (actor.json) to track with (empty: none)" },
         // Tracking options: the values and defaults of core/tracking/options.py (the test checks they agree).
@@ -80,22 +80,30 @@ const TRACKING_OPTIONS = ["preset", "particles", "iterations", "seed", "algorith
                           "background", "backend"];
 // `batch` keeps the chunk folders in OUT/_chunks, so a take may not be called that.
 const CHUNKS_FOLDER = "_chunks";
+// Frames an actor's build is fitted on, from the take's first (core/actor/frames.py DEFAULT_FRAMES); a shorter take
+// of several actors is tracked with the rigs, as `track` and `batch` do.
+const CALIBRATION_FRAMES = 20;
 
 function compileJob(job) {
     const settings = job.settings;
     const take = takeName(settings);
     const [first, last] = parseFrames(settings.frames);
     const actors = armatureNames(settings);
-    if (actors.length > 1) {
-        compileCast(job, settings, take, first, last, actors);
-        return;
+    if (actors.length > 1 && settings.actor) {
+        throw `actor "${settings.actor}": an actor calibration is one actor's, but the job tracks ` +
+              `${actors.join(", ")}; leave it empty (each actor's build is fitted on the take)`;
     }
     const plan = planChunks(first, last, intSetting(settings, "chunk_frames"), intSetting(settings, "warmup"),
                             intSetting(settings, "overlap"));
     const chunksDir = path.join(settings.output_root, CHUNKS_FOLDER);
-    const common = ["--scene", settings.blendfile, "--capture", settings.capture, "--take", take]
-        .concat(optionalArgs(settings), trackingArgs(settings));
-    print(`Markerless Mocap: take ${take}, frames ${first}-${last}, ${plan.length} chunk(s)`);
+    const common = ["--scene", settings.blendfile, "--capture", settings.capture, "--take", take];
+    for (const name of actors) common.push("--armature", name);
+    if (settings.actor) common.push("--actor", settings.actor);
+    const fits = actors.length > 1 && last - first + 1 >= CALIBRATION_FRAMES ?
+        calibrationTasks(job, settings, take, first, actors, chunksDir, common) : [];
+    common.push(...trackingArgs(settings));
+    const who = actors.length > 1 ? `, ${actors.length} actors` : "";
+    print(`Markerless Mocap: take ${take}, frames ${first}-${last}, ${plan.length} chunk(s)${who}`);
 
     const planArgs = ["--chunk-frames", String(intSetting(settings, "chunk_frames")),
                       "--warmup", String(intSetting(settings, "warmup")),
@@ -107,6 +115,7 @@ function compileJob(job) {
         seeds = author.Task(`seeds-${take}`, TASK_TYPE);
         seeds.addCommand(mocapCommand(settings, ["seed-chunks", "--frames", `${first}-${last}`, "--chunks", chunksDir]
             .concat(planArgs, common)));
+        for (const fit of fits) seeds.addDependency(fit);
         job.addTask(seeds);
     }
     const chunkTasks = plan.map((chunk) => {
@@ -114,6 +123,7 @@ function compileJob(job) {
         task.addCommand(mocapCommand(settings, ["track-chunk", "--frames", `${chunk.track[0]}-${chunk.track[1]}`,
                                                 "--chunks", chunksDir].concat(common)));
         if (chunk.index > 0) task.addDependency(seeds);
+        else for (const fit of fits) task.addDependency(fit);
         job.addTask(task);
         return task;
     });
@@ -128,21 +138,25 @@ function compileJob(job) {
     job.addTask(stitch);
 }
 
-// Several actors (operators/batch_cast.py): their poses are solved in one frame loop, so the take is one task, the
-// `track` command with every armature; --resume lets a requeued task continue from the frames already solved.
-function compileCast(job, settings, take, first, last, actors) {
-    if (settings.actor) {
-        throw `actor "${settings.actor}": an actor calibration is one actor's, but the job tracks ` +
-              `${actors.join(", ")}; leave it empty (each actor's build is fitted on the take)`;
-    }
-    const args = ["track", "--scene", settings.blendfile, "--capture", settings.capture,
-                  "--out", path.join(settings.output_root, take), "--frames", `${first}-${last}`, "--resume",
-                  "--smooth", String(Number(settings.smooth))];
-    for (const name of actors) args.push("--armature", name);
-    print(`Markerless Mocap: take ${take}, frames ${first}-${last}, ${actors.length} actors in one task`);
-    const task = author.Task(`track-${take}`, TASK_TYPE);
-    task.addCommand(mocapCommand(settings, args.concat(trackingArgs(settings))));
-    job.addTask(task);
+// Several actors: each one's build fitted on the take's first frames by `calibrate`, into the folder `batch` fits
+// it in (so the two share it), before anything is tracked; every later command is given it as --actor NAME=FILE.
+function calibrationTasks(job, settings, take, first, actors, chunksDir, common) {
+    return actors.map((name) => {
+        const dir = path.join(chunksDir, take, "actors", actorFolderName(name));
+        const task = author.Task(`calibrate-${take}-${actorFolderName(name)}`, TASK_TYPE);
+        task.addCommand(mocapCommand(settings, [
+            "calibrate", "--scene", settings.blendfile, "--capture", settings.capture, "--out", dir,
+            "--frames", `${first}-${first + CALIBRATION_FRAMES - 1}`, "--armature", name,
+        ].concat(trackingArgs(settings))));
+        job.addTask(task);
+        common.push("--actor", `${name}=${path.join(dir, "actor.json")}`);
+        return task;
+    });
+}
+
+// core/results/result_folder.py's actor_folder_name: an armature's name as a folder name.
+function actorFolderName(name) {
+    return name.replace(/[<>:"/\\|?*\x00-\x1f]/g, "_").replace(/^[ .]+|[ .]+$/g, "") || "armature";
 }
 
 function armatureNames(settings) {
@@ -192,13 +206,6 @@ function trackingArgs(settings) {
         if ((key === "particles" || key === "iterations") && Number(value) === 0) continue; // the preset's
         args.push(`--${key}`, String(value));
     }
-    return args;
-}
-
-function optionalArgs(settings) {
-    const args = [];
-    if (settings.armature) args.push("--armature", settings.armature);
-    if (settings.actor) args.push("--actor", settings.actor);
     return args;
 }
 

@@ -143,15 +143,33 @@ test("one exec task per chunk, and a stitch task that depends on every one of th
     assert.equal(args[args.indexOf("--out") + 1], "/farm/results/walk01");
 });
 
-test("several actors: one track task for the whole take, no saved calibration, each name once", () => {
+test("several actors: each build fitted first, then chunks tracking them all, no saved calibration", () => {
     const job = compile(Object.assign({}, SAMPLE, { armature: " Lead,Partner " }));
-    assert.equal(job.tasks.length, 1);
-    const args = plain(job.tasks[0].commands[0].parameters.args);
-    assert.equal(job.tasks[0].name, "track-walk01");
-    assert.equal(args[3], "track");
-    assert.ok(args.includes("--resume"));
-    assert.deepEqual(args.filter((_, i) => args[i - 1] === "--armature"), ["Lead", "Partner"]);
-    assert.equal(args[args.indexOf("--out") + 1], "/farm/results/walk01");
+    const { planChunks } = loadJobType();
+    const plan = planChunks(0, 999, 300, 10, 5);
+    const names = job.tasks.map((t) => t.name);
+    assert.deepEqual(names.slice(0, 3), ["calibrate-walk01-Lead", "calibrate-walk01-Partner", "seeds-walk01"]);
+    assert.equal(job.tasks.length, 2 + 1 + plan.length + 1);
+    const fits = job.tasks.slice(0, 2);
+    for (const [i, name] of ["Lead", "Partner"].entries()) {
+        const args = plain(fits[i].commands[0].parameters.args);
+        assert.equal(args[3], "calibrate");
+        assert.equal(args[args.indexOf("--armature") + 1], name);
+        assert.equal(args[args.indexOf("--out") + 1], `/farm/results/_chunks/walk01/actors/${name}`);
+        assert.equal(args[args.indexOf("--frames") + 1], "0-19");
+    }
+    for (const task of job.tasks.slice(2)) {
+        const args = plain(task.commands[0].parameters.args);
+        assert.deepEqual(args.filter((_, i) => args[i - 1] === "--armature"), ["Lead", "Partner"], task.name);
+        assert.deepEqual(args.filter((_, i) => args[i - 1] === "--actor"),
+                         ["Lead=/farm/results/_chunks/walk01/actors/Lead/actor.json",
+                          "Partner=/farm/results/_chunks/walk01/actors/Partner/actor.json"], task.name);
+    }
+    // nothing is tracked before both builds are fitted
+    assert.deepEqual(job.tasks[2].dependencies, fits);
+    assert.deepEqual(job.tasks[3].dependencies, fits);
+    const short = compile(Object.assign({}, SAMPLE, { armature: "Lead,Partner", frames: "0-9" }));
+    assert.deepEqual(short.tasks.map((t) => t.name), ["track-walk01-000000-000009", "stitch-walk01"]);
     assert.match(thrownBy(() => compile(Object.assign({}, SAMPLE, { armature: "Lead,Partner", actor: "/a.json" }))),
                  /an actor calibration is one actor's/);
     assert.match(thrownBy(() => compile(Object.assign({}, SAMPLE, { armature: "Lead, Lead" }))), /a name given twice/);
