@@ -9,8 +9,9 @@ calls that same callback on the main thread at the interval it asks for, until i
   Build being on by default, the take 20 frames long) the actor fitted first into the take's actor.json, which the
   chunks tracked with and the keys were made from.
 - Several armatures (duet): Track Every Armature, the last actor's height measured on its armature, one process,
-  frames 0-2. The batch tracks the take whole on one worker (operators/batch_cast.py); each armature must be keyed on
-  every frame from its own result folder, and the measured height must have reached that actor's fit.
+  frames 0-2: one chunk tracking both actors, after a fit of each actor's build (tests/test_batch_cast.py cuts such a
+  take into several chunks); each armature must be keyed on every frame from its own result folder, and the measured
+  height must have reached that actor's fit.
 """
 import json
 import sys
