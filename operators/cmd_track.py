@@ -63,7 +63,7 @@ def add_arguments(p):
     p.add_argument("--resume", action="store_true", help="continue after the last solved frame in --out")
     p.add_argument("--stop-with-parent", action="store_true",
                    help=f"stop (exit {EXIT_PARENT_GONE}, the frames solved kept for --resume) when the process that "
-                        "started this one ends (a batch worker killed mid-take: the take is run again elsewhere)")
+                        "started this one ends (a farm worker killed mid-take: run again, it resumes)")
     p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
     p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
     actor = p.add_mutually_exclusive_group()
