@@ -16,6 +16,7 @@ landmarks, then ISA) around the pass's pose at its first frame instead of the pl
 """
 from __future__ import annotations
 
+import glob
 from pathlib import Path
 
 import numpy as np
@@ -36,22 +37,14 @@ def seed_frames(first, starts, stride=SEED_STRIDE):
     return sorted(set(range(first, last + 1, max(1, int(stride)))) | {int(s) for s in starts} | {first})
 
 
-def follow_landmarks(tracker, frames, placement, progress=None, starts=(), reached=None):
-    """(frames, poses (S,D), fitted (S,)) of the person followed over `frames` (ascending) with the tracker's
-    landmark evidence, from `placement` (the subject as placed) at the first of them, which keeps the placement
-    itself: a chunk that starts there starts as `track` does. Where the landmarks do not place the body, the last
-    pose is carried on. `reached(frames, poses, fitted)` is called with what is followed so far at each of `starts`
-    (the chunks' first frames), so their chunks can begin before the pass ends."""
-    said = None if reached is None else (lambda f, poses, fitted: reached(f, poses[0], fitted[0]))
-    followed, poses, fitted = follow_actors([tracker], frames, [placement], progress, starts, said)
-    return followed, poses[0], fitted[0]
-
-
 def follow_actors(trackers, frames, placements, progress=None, starts=(), reached=None):
-    """follow_landmarks for several actors at once, one tracker and placement each: (frames, [poses (S,D)],
-    [fitted (S,)]) in the trackers' order. At each frame every actor is fitted in turn with the others' bodies set
-    apart where they were just followed (core/tracking/other_actors.py), so a landmark of the person beside it is
-    not taken for its own."""
+    """(frames, [poses (S,D)], [fitted (S,) bool]) of each actor (one tracker and placement each, the subject as
+    placed) followed over `frames` (ascending) with its tracker's landmark evidence, from its placement at the first
+    of them, which is kept as it is: a chunk that starts there starts as `track` does. Where the landmarks do not
+    place a body, its last pose is carried on. With several actors each is fitted in turn with the others' bodies
+    set apart where they were just followed (core/tracking/other_actors.py), so a landmark of the person beside it
+    is not taken for its own. `reached(frames, poses, fitted)` is called with what is followed so far at each of
+    `starts` (the chunks' first frames), so their chunks can begin before the pass ends."""
     from ..tracking.other_actors import OtherActor, OtherActors
 
     starts = {int(s) for s in starts}
@@ -103,7 +96,7 @@ def write_seeds(path, frames, poses, fitted):
 def find_seed(chunks_root, take, key, frame, actor=None):
     """The followed pose at `frame` from a seeds file of this take, key and actor, or None when none holds that
     frame."""
-    mine = f"_{key}{_actor_suffix(actor)}"
+    mine = glob.escape(f"_{key}{_actor_suffix(actor)}")
     for pattern in (f"seeds-*{mine}.npz", f"seeds-*{mine}.so-far.npz"):  # finished, then so far
         for path in sorted((Path(chunks_root) / take).glob(pattern)):
             try:
@@ -116,5 +109,4 @@ def find_seed(chunks_root, take, key, frame, actor=None):
     return None
 
 
-__all__ = ["SEED_STRIDE", "find_seed", "follow_actors", "follow_landmarks", "seed_frames", "seeds_path", "so_far_path",
-           "write_seeds"]
+__all__ = ["SEED_STRIDE", "find_seed", "follow_actors", "seed_frames", "seeds_path", "so_far_path", "write_seeds"]
