@@ -512,12 +512,13 @@ class Batch:
 
 
 def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
-    """Fit the actor of each take that calibrates (`calibrate = true`, or by default a take of at least DEFAULT_FRAMES
-    frames without an `actor`) on its first frames: one `calibrate` command per actor (each of a take of several, as
-    `track` fits them), all submitted to the cluster at once before any chunk is planned (the chunks track with the
-    fit), written on the shared storage (CHUNKS/<take>/actor/, or CHUNKS/<take>/actors/<armature>/) and kept beside
-    the take's result; a rerun reuses a fit already there. Returns {take name: reason} for the takes
-    whose fit failed, or None when the batch was cancelled meanwhile."""
+    """Fit the actors of the takes that calibrate on their first frames (a take without an `actor`: with `calibrate =
+    true`; by default when it has at least DEFAULT_FRAMES frames, or for an actor whose lengths were measured): one
+    `calibrate` command per actor (each of a take of several, as `track` fits them), all submitted to the cluster at
+    once before any chunk is planned (the chunks track with the fit), written on the shared storage
+    (CHUNKS/<take>/actor/, or CHUNKS/<take>/actors/<armature>/) and kept beside the take's result; a rerun reuses a
+    fit already there. Returns {take name: reason} for the takes whose fit failed, or None when the batch was
+    cancelled meanwhile."""
     from ..core.actor.frames import DEFAULT_FRAMES
     from ..core.batch.cluster import failure_text
 
@@ -525,10 +526,10 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
     for take in takes:
         if take.actor is not None or take.calibrate is False:
             continue
-        if take.calibrate is None and take.n_frames < DEFAULT_FRAMES:
-            continue
         first, last = take.frames[0], min(take.frames[1], take.frames[0] + DEFAULT_FRAMES - 1)
         for name in take.names:
+            if take.calibrate is None and take.n_frames < DEFAULT_FRAMES and not take.measured_of(name):
+                continue  # as `track`: a short take keeps the rig, unless the actor's lengths were measured
             shared = chunks_root / take.name / (Path(ACTORS_FOLDER) / actor_folder_name(name) if take.several
                                                 else "actor")
             fit = shared / "actor.json"
