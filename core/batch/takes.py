@@ -10,7 +10,8 @@
                                     as one actor's take (each chunk tracks them together, as `track` does)
     actor = "anna/actor.json"       optional: an actor calibration to track with
     calibrate = false               optional: track with the rig's proportions; by default a take of at least
-                                    20 frames without `actor` is tracked with the actor's, fitted on its first frames
+                                    20 frames without `actor` (or whose actor was measured) is tracked with the
+                                    actor's, fitted on its first frames
     measured = ["height=1.72"]      optional: lengths measured on the actor for that fit (several actors: say whose,
                                     "Partner:height=1.62")
     seed = 1                        optional: any tracking option, over [defaults]
