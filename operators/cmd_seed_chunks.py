@@ -59,7 +59,8 @@ def run(args):
     finally:
         if work is not None:
             shutil.rmtree(work, ignore_errors=True)
-    placed = ", ".join(str(int(f.sum())) for f in fitted)
-    print(f"followed {len(visit)} frames, {placed} placed by the landmarks", file=sys.stderr)
+    placed = [int(f.sum()) for f in fitted]
+    said = ", ".join(f"{name} {n}" for name, n in zip(actors.names, placed)) if actors.several else str(placed[0])
+    print(f"followed {len(visit)} frames, {said} placed by the landmarks", file=sys.stderr)
     print("\n".join(map(str, paths)))
     return 0
