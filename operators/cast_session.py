@@ -10,7 +10,8 @@ from pathlib import Path
 
 from ..core.atomic_files import atomic_path, write_json
 from ..core.errors import InputError
-from ..core.results.result_folder import ACTORS_FOLDER, actor_folder_name, require_writable_folder
+from ..core.results.result_folder import (ACTORS_FOLDER, actor_folder_name, actor_result_folder,
+                                              require_writable_folder)
 from ..core.tracking.cast import others_of
 from .track_session import TrackSession
 
@@ -60,7 +61,7 @@ class CastSession:
         self.sessions = []
         try:
             for armature, folder, actor in zip(armatures, folders, actors or [None] * len(armatures)):
-                self.sessions.append(TrackSession(scene, armature, capture_dir, self.out / ACTORS_FOLDER / folder,
+                self.sessions.append(TrackSession(scene, armature, capture_dir, actor_result_folder(self.out, folder),
                                                   actor=actor, **options))
         except Exception:
             self.close()

@@ -25,7 +25,7 @@ from pathlib import Path
 from ..core.atomic_files import write_json
 from ..core.batch.progress import (CANCEL_FILE, cancel_requested, frames_solved, progress_lines, read_progress,
                                    request_cancel, write_progress)
-from ..core.results.result_folder import ACTORS_FOLDER, actor_folder_name
+from ..core.results.result_folder import ACTORS_FOLDER, actor_result_folder
 from ..core.tracking.options import CHOICE_NAMES
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
@@ -211,11 +211,10 @@ def check_rigs(takes):
 
 class TakeRun:
     """One take in the batch: its chunks' folders and futures, its stitch, its state. `seeds`: the seed pass's files,
-    one per actor (core/batch/seed.py); `actor_folders`: each actor's folder name in a take of several, else [None]."""
+    one per actor (core/batch/seed.py)."""
 
-    def __init__(self, take, plan, folders, seeds, actor_folders=(None,)):
+    def __init__(self, take, plan, folders, seeds):
         self.take, self.plan, self.folders, self.seeds = take, plan, folders, list(seeds)
-        self.actor_folders = list(actor_folders)
         self.futures = {}  # chunk index -> future
         self.attempts = {}  # chunk index -> runs that ended with a failure that is not the user's
         self.seed_future = None  # the seed pass (core/batch/seed.py), before the chunks after the first
@@ -359,7 +358,7 @@ class Batch:
             for chunk, folder in zip(run.plan, run.folders):
                 if chunk.index and chunk.index not in run.futures and not folder.done:
                     if any(find_seed(self.chunks_root, run.take.name, folder.key, chunk.track[0], part) is None
-                           for part in run.actor_folders):
+                           for part in run.take.actor_folders):
                         break
                     run.futures[chunk.index] = runner.submit(f"{run.take.name}-{chunk.name}",
                                                              self.chunk_argv(run, chunk))
@@ -460,8 +459,8 @@ class Batch:
             saved = json.loads((out / STITCHED_FILE).read_text())
         except (OSError, ValueError):
             return False
-        results = [out if part is None else out / ACTORS_FOLDER / part for part in run.actor_folders]
-        return (out / "report.json").is_file() and all((r / "joints.npz").is_file() for r in results) \
+        return (out / "report.json").is_file() \
+            and all((actor_result_folder(out, part) / "joints.npz").is_file() for part in run.take.actor_folders) \
             and saved == self.stitch_signature(run)
 
     def cancel(self):
@@ -527,14 +526,13 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
         if take.actor is not None or take.calibrate is False:
             continue
         first, last = take.frames[0], min(take.frames[1], take.frames[0] + DEFAULT_FRAMES - 1)
-        for name in take.names:
+        for name, part in zip(take.names, take.actor_folders):
             if take.calibrate is None and take.n_frames < DEFAULT_FRAMES and not take.measured_of(name):
                 continue  # as `track`: a short take keeps the rig, unless the actor's lengths were measured
-            shared = chunks_root / take.name / (Path(ACTORS_FOLDER) / actor_folder_name(name) if take.several
-                                                else "actor")
-            fit = shared / "actor.json"
+            shared = chunks_root / take.name / ("actor" if part is None else Path(ACTORS_FOLDER) / part)
+            fit, result = shared / "actor.json", actor_result_folder(out / take.name, part)
             if fit.is_file():
-                _keep_fit(take, name, fit, out)
+                _keep_fit(take, name, fit, result)
                 continue
             argv = [*command, "calibrate", "--scene", mapped(take.scene), "--capture", mapped(take.capture),
                     "--out", mapped(shared), "--frames", f"{first}-{last}"]
@@ -544,13 +542,13 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
             whose = f" {name}" if take.several else ""
             print(f"batch: take {take.name!r}: calibrating the actor{whose} on frames {first}-{last}",
                   file=sys.stderr, flush=True)
-            pending[(take.name, name)] = (take, fit, runner.submit(f"{take.name}-calibrate{whose.replace(' ', '-')}",
-                                                                   argv, check=False))
+            task = runner.submit(f"{take.name}-calibrate{whose.replace(' ', '-')}", argv, check=False)
+            pending[(take.name, name)] = (take, whose, fit, result, task)
     failed = {}
     while pending:
         if cancel_requested(out):
             return None
-        for (take_name, name), (take, fit, future) in list(pending.items()):
+        for (take_name, name), (take, whose, fit, result, future) in list(pending.items()):
             if future.status == "pending":
                 continue
             del pending[(take_name, name)]
@@ -558,12 +556,11 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
                 done = future.result(timeout=5)
             except Exception as exc:  # noqa: BLE001  (the worker's failure is the take's reason)
                 done = exc
-            whose = f" {name}" if take.several else ""
             if getattr(done, "returncode", 1) != 0 or not fit.is_file():
                 failed.setdefault(take_name, f"actor{whose} calibration: {failure_text(done)}")
                 continue
             print(f"batch: take {take_name!r}: actor{whose} calibrated", file=sys.stderr, flush=True)
-            _keep_fit(take, name, fit, out)
+            _keep_fit(take, name, fit, result)
         if pending:
             time.sleep(POLL_SECONDS)
     for take in takes:
@@ -572,17 +569,16 @@ def calibrate_takes(takes, out, runner, command, mapped, chunks_root):
     return failed
 
 
-def _keep_fit(take, name, fit, out):
-    """Track the take's actor `name` with the fit, and keep it beside the take's result from now on (DIR/<take>/, or
-    its actors/<armature>/), where Blender's Track reads it to key the take (the stitch writes it there too)."""
+def _keep_fit(take, name, fit, result):
+    """Track the take's actor `name` with the fit, and keep it beside that actor's result from now on (`result`:
+    DIR/<take>/, or its actors/<armature>/), where Blender's Track reads it to key the take (the stitch writes it there
+    too)."""
     from ..core.actor.actor_file import load_actor, write_actor
 
     if take.several:
         take.fitted[name] = fit
-        result = out / take.name / ACTORS_FOLDER / actor_folder_name(name)
     else:
         take.actor = fit
-        result = out / take.name
     result.mkdir(parents=True, exist_ok=True)
     write_actor(result / "actor.json", load_actor(fit))
 
@@ -662,10 +658,9 @@ def run(args):
             for take in takes:
                 plan = plans[take.name]
                 key = take_key(take)
-                parts = [actor_folder_name(n) for n in take.names] if take.several else [None]
                 batch.runs.append(TakeRun(take, plan, [ChunkFolder(chunks_root, take.name, c.track, key) for c in plan],
-                                          [seeds_path(chunks_root, take.name, *take.frames, key, p) for p in parts],
-                                          parts))
+                                          [seeds_path(chunks_root, take.name, *take.frames, key, part)
+                                           for part in take.actor_folders]))
                 if take.name in uncalibrated:  # fails alone; the other takes go on
                     batch.runs[-1].fail(uncalibrated[take.name])
             batch.frames_at_start = sum(r.frames_done() for r in batch.runs)

@@ -6,7 +6,7 @@ import shutil
 import sys
 
 from .cmd_plan_chunks import add_chunk_arguments
-from .cmd_track import open_subject, parse_frames
+from .cmd_track import open_subject, parse_frames, settings_from_args
 from .cmd_track_chunk import add_take_arguments, sessions_of, take_inputs, take_session
 
 
@@ -24,7 +24,7 @@ def run(args):
     frames = parse_frames(args.frames)
     work = None
     try:
-        settings, actors, key = take_inputs(args)
+        _settings, actors, key = take_inputs(args)
         plan = plan_chunks(frames[0], frames[-1], args.chunk_frames, args.warmup, args.overlap)
         paths = [seeds_path(args.chunks, args.take, frames[0], frames[-1], key, part) for part in actors.folders]
         if all(path.is_file() for path in paths):
@@ -34,7 +34,8 @@ def run(args):
         scene = open_subject(args.scene)
         backend = choose_backend(args.backend).used
         work = paths[0].with_name(f".{paths[0].stem}.work")  # the sessions' result folder, unused: removed after
-        session = take_session(scene, actors, args.capture, work, take_inputs(args, backend)[0], frames, smooth_hz=0)
+        session = take_session(scene, actors, args.capture, work, settings_from_args(args, backend), frames,
+                               smooth_hz=0)
         each = sessions_of(session)
         trackers = [s.prepare() for s in each]
 

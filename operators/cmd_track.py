@@ -304,7 +304,7 @@ def solve_all(session, out, stop_with_parent=False):
 def run_cast(args, scene, names, choice):
     """`track` with several --armature: every actor in one frame loop (operators/cast_session.py)."""
     from ..addon.scene_bridge import find_armature
-    from ..core.results.result_folder import ACTORS_FOLDER
+    from ..core.results.result_folder import actor_result_folder
     from .cast_session import CastSession, cast_folders
     from .failures import USER_ERRORS, cli_failure
 
@@ -314,7 +314,7 @@ def run_cast(args, scene, names, choice):
         # each actor's build fitted as one alone, into its own result folder, by default as for one actor
         # (docs/measurements.md, "Other people in the room": the duet gains with it); --no-calibrate: none
         actors = [load_actor_option(argparse.Namespace(**{**vars(args), "armature": list(names),
-                                                          "out": args.out / ACTORS_FOLDER / folder}),
+                                                          "out": actor_result_folder(args.out, folder)}),
                                     scene, a, choice.used)
                   for a, folder in zip(armatures, folders)]
         cast = CastSession(scene, armatures, args.capture, args.out, settings=settings_from_args(args, choice.used),

@@ -334,9 +334,9 @@ def finish(scene, run, progress):
 
 def _key_each(scene, run, result):
     """Key the result on the armature, or each actor's (result/actors/<name>/) on its own; the frames keyed."""
-    from ..core.results.result_folder import ACTORS_FOLDER, actor_folder_name
+    from ..core.results.result_folder import actor_folder_name, actor_result_folder
 
-    targets = [(name, result / ACTORS_FOLDER / actor_folder_name(name)) for name in run.cast] or \
+    targets = [(name, actor_result_folder(result, actor_folder_name(name))) for name in run.cast] or \
         [(run.armature_name, result)]
     for name, folder in targets:
         armature = bpy.data.objects.get(name)

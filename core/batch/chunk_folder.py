@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
-from ..results.result_folder import ACTORS_FOLDER
+from ..results.result_folder import actor_result_folder
 from ..tracking import checkpoint
 from .plan import frame_range_name
 
@@ -112,15 +112,11 @@ class ChunkFolder:
             raise ChunkError(f"chunk {self.path}: {INFO_FILE} cannot be read ({exc}); delete the folder and run "
                              "the chunk again") from None
 
-    def _result(self, actor):
-        """The chunk's result folder: its own, or one of several actors' (`actor`: that actor's folder name)."""
-        return self.path if actor is None else self.path / ACTORS_FOLDER / actor
-
     def report(self, actor=None):
         """The chunk's (or its `actor`'s) report.json as a dict ({} when it has none: chunks tracked before it was
         kept)."""
         try:
-            return json.loads((self._result(actor) / REPORT_FILE).read_text())
+            return json.loads((actor_result_folder(self.path, actor) / REPORT_FILE).read_text())
         except FileNotFoundError:
             return {}
         except (OSError, ValueError) as exc:
@@ -131,7 +127,7 @@ class ChunkFolder:
         """{frame: FrameEstimate} of the finished chunk (of its `actor`, by folder name, in a take of several)."""
         if not self.done:
             raise ChunkError(f"chunk {self.path} is not finished: run its track-chunk command (or the batch) first")
-        path = self._result(actor) / checkpoint.FILE_NAME
+        path = actor_result_folder(self.path, actor) / checkpoint.FILE_NAME
         if not path.is_file():
             raise ChunkError(f"chunk {self.path} holds no {path.relative_to(self.path)}: it was tracked for other "
                              "actors; delete the folder and run the chunk again")

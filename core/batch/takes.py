@@ -32,6 +32,7 @@ from ..actor.per_actor import options_of
 from ..capture.calibration import find_calibration_file
 from ..capture.capture import load_capture
 from ..errors import InputError
+from ..results.result_folder import actor_folder_name
 from ..tracking.options import CHOICE_NAMES, settings_from_choices
 from .chunk_folder import check_take_name
 
@@ -67,6 +68,12 @@ class Take:
     def names(self):
         """The armatures tracked: several, the one named, or [None] for the scene's only one."""
         return list(self.armatures) if self.several else [self.armature]
+
+    @property
+    def actor_folders(self):
+        """Each actor's folder name under a result's actors/ (core/results/result_folder.py), or [None] for one
+        actor, whose files are the result folder's own."""
+        return [actor_folder_name(n) for n in self.names] if self.several else [None]
 
     def measured_of(self, name):
         """The SEGMENT=METRES lengths of actor `name` (None: the take's one actor), read from `measured` as `track
@@ -269,7 +276,7 @@ def _check_measured(take, where):
     """The take's measured lengths read as `track --calibrate-measured` reads them, each actor's named when the take
     has several (its armatures known by now, the command line's --armature included)."""
     try:
-        for name in take.armatures or [take.armature]:
+        for name in take.names:
             parse_measured(take.measured_of(name))
     except InputError as exc:
         raise TakeListError(f"{where}: measured: {exc}") from None

@@ -37,6 +37,12 @@ def actor_folder_name(name):
     return re.sub(r'[<>:"/\\|?*\x00-\x1f]', "_", name).strip(" .") or "armature"
 
 
+def actor_result_folder(out, folder):
+    """Where one actor's files are in a take's result folder `out`: `out` itself for a take of one actor (`folder`
+    None), out/actors/<folder> for one of several (`folder`: actor_folder_name of its armature)."""
+    return Path(out) if folder is None else Path(out) / ACTORS_FOLDER / folder
+
+
 class ResultWriteError(OSError):
     """The result folder cannot be written (not writable, disk full...); the message names the folder."""
 
