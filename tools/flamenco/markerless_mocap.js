@@ -100,7 +100,8 @@ function compileJob(job) {
     for (const name of actors) common.push("--armature", name);
     if (settings.actor) common.push("--actor", settings.actor);
     const fits = actors.length > 1 && last - first + 1 >= CALIBRATION_FRAMES ?
-        calibrationTasks(job, settings, take, first, actors, chunksDir, common) : [];
+        calibrationTasks(job, settings, take, first, actors, chunksDir) : [];
+    for (const fit of fits) common.push("--actor", `${fit.actor}=${fit.file}`);
     common.push(...trackingArgs(settings));
     const who = actors.length > 1 ? `, ${actors.length} actors` : "";
     print(`Markerless Mocap: take ${take}, frames ${first}-${last}, ${plan.length} chunk(s)${who}`);
@@ -115,7 +116,7 @@ function compileJob(job) {
         seeds = author.Task(`seeds-${take}`, TASK_TYPE);
         seeds.addCommand(mocapCommand(settings, ["seed-chunks", "--frames", `${first}-${last}`, "--chunks", chunksDir]
             .concat(planArgs, common)));
-        for (const fit of fits) seeds.addDependency(fit);
+        for (const fit of fits) seeds.addDependency(fit.task);
         job.addTask(seeds);
     }
     const chunkTasks = plan.map((chunk) => {
@@ -123,7 +124,7 @@ function compileJob(job) {
         task.addCommand(mocapCommand(settings, ["track-chunk", "--frames", `${chunk.track[0]}-${chunk.track[1]}`,
                                                 "--chunks", chunksDir].concat(common)));
         if (chunk.index > 0) task.addDependency(seeds);
-        else for (const fit of fits) task.addDependency(fit);
+        else for (const fit of fits) task.addDependency(fit.task);
         job.addTask(task);
         return task;
     });
@@ -139,8 +140,9 @@ function compileJob(job) {
 }
 
 // Several actors: each one's build fitted on the take's first frames by `calibrate`, into the folder `batch` fits
-// it in (so the two share it), before anything is tracked; every later command is given it as --actor NAME=FILE.
-function calibrationTasks(job, settings, take, first, actors, chunksDir, common) {
+// it in (so the two share it), before anything is tracked. Returns {task, actor, file} per actor: every later
+// command is given the file as --actor NAME=FILE.
+function calibrationTasks(job, settings, take, first, actors, chunksDir) {
     return actors.map((name) => {
         const dir = path.join(chunksDir, take, "actors", actorFolderName(name));
         const task = author.Task(`calibrate-${take}-${actorFolderName(name)}`, TASK_TYPE);
@@ -149,8 +151,7 @@ function calibrationTasks(job, settings, take, first, actors, chunksDir, common)
             "--frames", `${first}-${first + CALIBRATION_FRAMES - 1}`, "--armature", name,
         ].concat(trackingArgs(settings))));
         job.addTask(task);
-        common.push("--actor", `${name}=${path.join(dir, "actor.json")}`);
-        return task;
+        return {task, actor: name, file: path.join(dir, "actor.json")};
     });
 }
 
