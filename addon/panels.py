@@ -194,6 +194,7 @@ class MOCAP_PT_track(_MocapPanel, bpy.types.Panel):
         threshold.prop(props, "foot_lock_speed")
         settings.prop(props, "backend")
         settings.prop(props, "background")
+        settings.prop(props, "landmarks")
         if props.backend_used:  # what the last Track chose (auto probes the GPU), wrapped: a label does not wrap
             _wrapped(settings, f"Using: {props.backend_used}", context, icon="INFO")
         settings.prop(props, "use_frame_range")

@@ -177,6 +177,7 @@ class MocapSettings(bpy.types.PropertyGroup):
                                                "planted feet still slide, lower it if moving feet stick)")
     backend: _enum("backend")
     background: _enum("background")
+    landmarks: _enum("landmarks")
     use_frame_range: BoolProperty(name="Limit Frames", default=False,
                                   description="Track only a range of capture frames (otherwise all of them)")
     frame_start: IntProperty(name="First", default=0, min=0, description="First capture frame to track (0-based)")

@@ -79,7 +79,8 @@ def fit_calibration(session, log=None, progress=None, symmetric=True, silhouette
         landmarks = np.array([e.landmarks for e in est])
         visibility = np.array([e.landmark_visibility for e in est])
         fit = fit_proportions(session.character, session.capture.cameras, landmarks, visibility,
-                              np.array([e.pose for e in est]), frames=[e.frame for e in est], symmetric=symmetric)
+                              np.array([e.pose for e in est]), frames=[e.frame for e in est], symmetric=symmetric,
+                              model=session.settings.landmarks)
         if silhouettes:
             from ..core.actor.silhouette_fit import calibration_targets, refine_fit
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..addon import scene_bridge
 from ..core.capture.capture import load_capture
-from ..core.evidence.learned import require_model
+from ..core.evidence.learned import model_path, require_model
 from ..core.energy.likelihood import resolve_weights
 from ..core.results.result_folder import ResultWriter, atomic_path
 from ..core.tracking.foot_contact import CONTACT_SPEED, FootContactError, check_speed
@@ -57,7 +57,7 @@ class TrackSession:
             self.body = actor_body(actor, self.character)
         self.capture = load_capture(capture_dir, units=units)
         if resolve_weights(self.settings.likelihood).needs_learned_evidence:
-            require_model()  # a clear error now, not a traceback at the first frame
+            require_model(model_path(self.settings.landmarks))  # a clear error now, not at the first frame
         footage = self.capture.frames
         try:
             if frames is None:

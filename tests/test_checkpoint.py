@@ -191,3 +191,17 @@ def test_a_checkpoint_pkl_from_before_the_packages_resumes(tmp_path):
     assert (out / "checkpoint.npz").exists() and not (out / "checkpoint.pkl").exists()
     estimates, _, _ = checkpoint.read(out / "checkpoint.npz")
     assert [e.frame for e in estimates] == [0, 1, 2, 3, 4]
+
+
+def test_a_checkpoint_from_before_a_setting_existed_resumes_as_it_was_tracked():
+    """A checkpoint written before `landmarks` existed was tracked with the full model: it resumes with full and is
+    refused with heavy (the frames before would not be the heavy model's); `check_clothes` takes the run's value."""
+    from markerless_mocap.core.tracking.checkpoint import same_settings
+    from markerless_mocap.core.tracking.settings import TrackingSettings
+
+    old = TrackingSettings().to_dict()
+    del old["landmarks"], old["check_clothes"]
+    assert same_settings(old, TrackingSettings().to_dict())
+    assert same_settings(old, TrackingSettings(check_clothes=False).to_dict())
+    assert not same_settings(old, TrackingSettings(landmarks="heavy").to_dict())
+    assert not same_settings(TrackingSettings().to_dict(), TrackingSettings(landmarks="heavy").to_dict())

@@ -68,6 +68,24 @@ def test_missing_model_file_names_the_fix(tmp_path):
         LandmarkModel(tmp_path / "nope.tflite")
 
 
+def test_an_unknown_landmark_model_names_the_ones_there_are():
+    from markerless_mocap.core.evidence.learned import model_path
+
+    with pytest.raises(LearnedModelError, match="not one of full, heavy"):
+        model_path("huge")
+
+
+def test_the_options_landmark_models_are_the_model_files():
+    """The panel's and the command line's Landmark Model lists exactly the model files that ship."""
+    from markerless_mocap.core.evidence.learned import LANDMARK_MODEL_FILES, model_path
+    from markerless_mocap.core.tracking.options import OPTIONS
+
+    assert OPTIONS["landmarks"].values == tuple(LANDMARK_MODEL_FILES)
+    assert OPTIONS["landmarks"].default == "full"
+    for name in LANDMARK_MODEL_FILES:
+        assert model_path(name).is_file()
+
+
 # ------------------------------------------------------------------------------------------ the model on a frame
 @pytest.fixture(scope="module")
 def walk_frame():
@@ -80,14 +98,18 @@ def walk_frame():
     return capture, list(names), positions
 
 
-def test_model_finds_the_person_on_a_rendered_frame(walk_frame):
-    """Crops from the true pose, walk frame 0: 12 limb landmarks within 12 px median of the projected true
-    joints (measured 3.5-7.8 px per view), person masks IoU >= 0.85 with the true masks (measured 0.89-0.95)."""
+@pytest.mark.parametrize("model", ["full", "heavy"])
+def test_model_finds_the_person_on_a_rendered_frame(walk_frame, model):
+    """Crops from the true pose, walk frame 0, either landmark model: 12 limb landmarks within 12 px median of the
+    projected true joints (measured 3.5-7.8 px per view with full, 3.7-8.5 with heavy), person masks IoU >= 0.85
+    with the true masks (measured 0.89-0.95 with full; heavy's mask is looser on one view: 0.84-0.96, so 0.8)."""
+    from markerless_mocap.core.evidence.learned import model_path
+
     capture, names, positions = walk_frame
     images = capture.frames.read(0)
     cams = capture.cameras
     boxes = [crop_around(cam.project(positions[0])) for cam in cams]
-    evidence = locate(LandmarkModel(), [images[c.name] for c in cams], boxes)
+    evidence = locate(LandmarkModel(model_path(model)), [images[c.name] for c in cams], boxes)
     for cam, ev in zip(cams, evidence):
         assert ev.found and ev.presence > 0.9
         uv = cam.project(positions[0])
@@ -96,7 +118,7 @@ def test_model_finds_the_person_on_a_rendered_frame(walk_frame):
         iou = (truth & ev.mask).sum() / (truth | ev.mask).sum()
         print(f"{cam.name}: median landmark error {np.median(errors):.1f} px, mask IoU {iou:.3f}")
         assert np.median(errors) < 12.0
-        assert iou >= 0.85
+        assert iou >= (0.85 if model == "full" else 0.8)
 
 
 def test_a_crop_without_the_person_is_found_again_or_given_up(walk_frame):
@@ -582,23 +604,28 @@ def test_a_pose_on_a_second_guess_costs_little_more_than_on_the_landmark(walk_tr
     np.testing.assert_allclose(chosen[1, wrist], true_uv + [60.0, 0.0])
 
 
-def test_landmark_offsets_table_is_what_the_measuring_tool_finds():
-    """LANDMARK_OFFSETS against tools/landmark_offsets.py --raw on walk and playground (every 4th frame here,
-    every 2nd for the table): within 0.01 trunk (5 mm) per component."""
+@pytest.mark.parametrize("model", ["full", "heavy"])
+def test_landmark_offsets_table_is_what_the_measuring_tool_finds(model):
+    """Each landmark model's offsets table (LANDMARK_OFFSETS, HEAVY_LANDMARK_OFFSETS) against
+    tools/landmark_offsets.py --raw --model on walk and playground (every 4th frame here, every 2nd or 3rd for the
+    table): within 0.01 trunk (5 mm) per component. The two models place the elbows, knees and ankles 0.02-0.04
+    trunk apart, so a table fits its own model only."""
     pytest.importorskip("bpy")
 
-    from markerless_mocap.core.evidence.keypoints import LANDMARK_OFFSETS
+    from markerless_mocap.core.evidence.keypoints import offsets_table
 
     from tool_helpers import load_tool
 
     tool = load_tool("landmark_offsets")
     arrays = []
     for name in ("walk", "playground"):
-        landmarks, result = tool.measure(scene_dir(name), 4, raw=True)
+        landmarks, result = tool.measure(scene_dir(name), 4, raw=True, model=model)
         arrays.append(result["own"])
     table = tool.medians(landmarks, np.concatenate(arrays))
-    for lm, expected in LANDMARK_OFFSETS.items():
+    for lm, expected in offsets_table(model).items():
         np.testing.assert_allclose(table[lm][0], expected, atol=0.01, err_msg=f"landmark {lm}")
+    other = offsets_table("heavy" if model == "full" else "full")
+    assert max(np.abs(np.subtract(table[lm][0], other[lm])).max() for lm in other) > 0.02
 
 
 

@@ -284,7 +284,7 @@ def test_the_body_choice_scores_each_body_once(walk, monkeypatch):
 
     monkeypatch.setattr(calibration_check, "mask_mismatch", fake_mask_mismatch)
     targets = SimpleNamespace(cameras=[], masks=[], keypoints=[], resolution=lambda tracker: 1.0)
-    tracker = SimpleNamespace(proxy=None, settings=SimpleNamespace(backend="fast"))
+    tracker = SimpleNamespace(proxy=None, settings=SimpleNamespace(backend="fast", landmarks="full"))
     comparison = calibration_check.compare_bodies(fit, body, tracker, targets, poses[:3])
     assert len(scored) == len(set(scored)), "a body was scored twice"
     assert comparison.split["grid"] and comparison.hip_width["grid"] and comparison.height["grid"]

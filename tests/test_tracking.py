@@ -378,3 +378,23 @@ def test_clip_backgrounds_are_made_when_first_needed_and_equal_the_eager_ones(wa
     assert lazy.backgrounds.built == [names[1]]
     with_plates = make_tracker(walk)  # walk has plates: made at once, they cost nothing
     assert with_plates.backgrounds.built == names
+
+
+def test_the_heavy_landmark_model_is_what_the_tracker_looks_with(walk):
+    """settings.landmarks reaches both ends of the keypoint term: the observer runs that model's file and the energy
+    places the rig points by that model's offsets table; the two models' landmarks of the same crops differ."""
+    from markerless_mocap.core.evidence.keypoints import rig_keypoints
+    from markerless_mocap.core.evidence.learned import model_path
+
+    body, gt = walk["body"], walk["gt"]
+    seen = {}
+    for model in ("full", "heavy"):
+        tracker = make_tracker(walk, landmarks=model, particles=20, iterations=2, prefetch=False)
+        tracker.initialise(0, initial_pose=gt[0])
+        np.testing.assert_allclose(tracker.energy.rig_points.rest_points, rig_keypoints(body, model).rest_points)
+        assert tracker.observer.landmark_model is not None
+        seen[model] = np.array([ev.keypoints for ev in tracker.evidence])
+    assert not np.allclose(rig_keypoints(body, "full").rest_points, rig_keypoints(body, "heavy").rest_points)
+    shift = np.nanmedian(np.linalg.norm(seen["full"] - seen["heavy"], axis=-1))
+    assert 0.1 < shift < 10.0, shift  # the same person found, placed a little otherwise
+    assert model_path("heavy").name == "pose_landmark_heavy.tflite"

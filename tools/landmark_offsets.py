@@ -14,6 +14,7 @@ median moves with the carrier: BlazePose's placement depends on the footage, whi
 measure of a body's widths (docs/actor-calibration.md).
 
     .venv/bin/python tools/landmark_offsets.py sample_scenes/walk sample_scenes/playground [--step 2] [--raw]
+        [--model heavy]
 
 --raw: the offsets of the rig points without LANDMARK_OFFSETS (what the table should hold); without it, what is
 left over with the table applied (close to zero when the table is right).
@@ -25,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 
-def measure(scene, step, raw):
+def measure(scene, step, raw, model="full"):
     """(landmark numbers (K,), {carrier: (F,K,3) offsets in trunk units, NaN where not triangulated})."""
     import bpy
 
@@ -33,7 +34,7 @@ def measure(scene, step, raw):
     from markerless_mocap.core.body.model import body_frame
     from markerless_mocap.core.capture.capture import load_capture
     from markerless_mocap.core.evidence.crops import evidence_around
-    from markerless_mocap.core.evidence.learned import LandmarkModel
+    from markerless_mocap.core.evidence.learned import LandmarkModel, model_path
     from markerless_mocap.core.evidence.keypoint_fit import triangulated_landmarks
     from markerless_mocap.core.evidence.keypoints import rig_keypoints
     from markerless_mocap.core.body.pose_fit import poses_from_joints
@@ -43,11 +44,11 @@ def measure(scene, step, raw):
     bpy.ops.wm.open_mainfile(filepath=str(scene / "subject.blend"))
     body = body_from_blender(find_armature(bpy.context.scene), None, bpy.context.scene)
     sk = body.skeleton
-    rig = rig_keypoints(body)
+    rig = rig_keypoints(body, model)
     if raw:  # the joints themselves: the rest points without the table's offsets
         from markerless_mocap.core.evidence.keypoints import landmark_offsets
 
-        rig.rest_points[:, :3] -= landmark_offsets(body, rig.landmarks)
+        rig.rest_points[:, :3] -= landmark_offsets(body, rig.landmarks, model)
     frame = body_frame(sk, body.roles)
     axes = np.stack([frame.left, frame.forward, frame.up])  # rest armature space -> (left, forward, up)
     neck, root = sk.index[body.roles["neck"][0]], sk.index[body.roles["root"][0]]
@@ -57,12 +58,12 @@ def measure(scene, step, raw):
     picks = list(range(0, len(frames), step))
     poses, _ = poses_from_joints(body, names, positions[picks])
     capture = load_capture(scene)
-    model = LandmarkModel()
+    network = LandmarkModel(model_path(model))
     out = {c: [] for c in carriers}
     try:
         for pose, f in zip(poses, np.asarray(frames)[picks]):
             images = capture.frames.read(int(f))
-            evidence = evidence_around(model, body, capture.cameras, [images[c.name] for c in capture.cameras],
+            evidence = evidence_around(network, body, capture.cameras, [images[c.name] for c in capture.cameras],
                                        pose)  # as the tracker places the crops
             uv = np.stack([ev.keypoints for ev in evidence])
             vis = np.stack([ev.visibility if ev.found else np.zeros_like(ev.visibility) for ev in evidence])
@@ -89,10 +90,12 @@ def main(argv=None):
     ap.add_argument("scenes", nargs="+", type=Path)
     ap.add_argument("--step", type=int, default=2)
     ap.add_argument("--raw", action="store_true", help="offsets from the joints (without LANDMARK_OFFSETS)")
+    ap.add_argument("--model", default="full", help="the landmark model: full (LANDMARK_OFFSETS) or heavy "
+                                                    "(HEAVY_LANDMARK_OFFSETS)")
     args = ap.parse_args(argv)
     merged = {}
     for scene in args.scenes:
-        landmarks, result = measure(scene, args.step, args.raw)
+        landmarks, result = measure(scene, args.step, args.raw, args.model)
         for name, a in result.items():
             merged.setdefault(name, []).append(a)
             print(f"{scene.name}, carrier {name}: median (outwards, forwards, up) / MAD, trunk units")

@@ -100,7 +100,7 @@ def compare_bodies(fit, subject, tracker, targets, rig_poses):
         new = {k: p for k, p in zip(keys, bodies) if k not in known}
         costs = mask_mismatch(subject, tracker.proxy, targets.cameras, targets.masks,
                               [(p, rig_poses) for p in new.values()], targets.keypoints, targets.resolution(tracker),
-                              tracker.settings.backend)
+                              tracker.settings.backend, tracker.settings.landmarks)
         known.update(zip(new, costs))
         return [known[k] for k in keys]
 
@@ -123,16 +123,18 @@ def compare_bodies(fit, subject, tracker, targets, rig_poses):
                           {"log_change": w, "grid": widths}, height)
 
 
-def mask_mismatch(subject, proxy, cameras, masks, candidates, keypoints=None, resolution=1.0, backend="auto"):
+def mask_mismatch(subject, proxy, cameras, masks, candidates, keypoints=None, resolution=1.0, backend="auto",
+                  landmarks="full"):
     """Per candidate (Proportions, start poses (F,D)): the mean XOR / model area of that body against the masks
     (per frame a list of one bool mask per camera, at the cameras' resolution), its poses first refitted to the
-    masks (and keypoints) from the start poses. resolution: the masks' scale over the tracker's energy scale."""
+    masks (and keypoints, of the landmark model `landmarks`) from the start poses. resolution: the masks' scale over
+    the tracker's energy scale."""
     from .silhouette_fit import SilhouetteCost, refit_poses, scaled_proxy
 
     costs = []
     for proportions, start in candidates:
         poses = refit_poses(*scaled_proxy(subject, proxy, proportions), cameras, masks, np.asarray(start, float),
-                            keypoints, resolution)
+                            keypoints, resolution, landmarks)
         costs.append(float(SilhouetteCost(subject, proxy, cameras, masks, poses, backend)([proportions])[0]))
     return costs
 

@@ -92,8 +92,9 @@ class _JointProblem:
     """Factors and every frame's pose at once: residuals and a sparse finite-difference Jacobian whose
     pose columns are evaluated for all frames in one batched forward-kinematics call per DOF."""
 
-    def __init__(self, light, keys, points, oks, poses0, hold=0.02, pull=None):
+    def __init__(self, light, keys, points, oks, poses0, hold=0.02, pull=None, landmarks="full"):
         self.light, self.keys, self.points, self.oks = light, keys, points, oks
+        self.landmarks = landmarks
         self.poses0 = poses0
         self.F, self.D = poses0.shape
         self.n = len(keys)
@@ -111,7 +112,7 @@ class _JointProblem:
     def residuals(self, v, body=None):
         z, X = self.split(v)
         body = body or scaled_body(self.light, _proportions(self.keys, z))
-        rig = rig_keypoints(body)
+        rig = rig_keypoints(body, self.landmarks)
         world = rig.world(body, X)
         lm = np.concatenate([(world[f] - self.points[f])[ok].ravel() for f, ok in enumerate(self.oks)])
         hold = self.hold * (X[:, self.pulled] - self.poses0[:, self.pulled]).ravel()
@@ -153,19 +154,21 @@ def _solve(problem, log_f, poses, max_nfev):
     return problem.split(result.x)
 
 
-def _rms(body, poses, points, oks):
-    rig = rig_keypoints(body)
+def _rms(body, poses, points, oks, landmarks):
+    rig = rig_keypoints(body, landmarks)
     d = rig.world(body, poses) - points
     return float(np.sqrt(np.sum(np.square(d[oks])) / max(1, oks.sum())))
 
 
-def fit_proportions(subject, cameras, landmarks, visibility, poses, frames=None, symmetric=True, max_nfev=60):
+def fit_proportions(subject, cameras, landmarks, visibility, poses, frames=None, symmetric=True, max_nfev=60,
+                    model="full"):
     """Fit segment factors for `subject` (a Body) to tracked frames.
 
     landmarks (F,C,33,2), visibility (F,C,33): the learned landmarks of the frames (keypoints.npz);
-    poses (F,D): the subject's tracked poses of the same frames (starting points). Returns a ProportionsFit.
+    poses (F,D): the subject's tracked poses of the same frames (starting points); model: the landmark model that
+    placed the landmarks (core/evidence/keypoints.py, offsets_table). Returns a ProportionsFit.
     """
-    rig0 = rig_keypoints(subject)
+    rig0 = rig_keypoints(subject, model)
     points, oks = [], []
     for uv, vis in zip(landmarks, visibility):
         X, ok = triangulated_landmarks(cameras, targets_from_landmarks(uv, vis, rig0), rig0)
@@ -184,13 +187,13 @@ def fit_proportions(subject, cameras, landmarks, visibility, poses, frames=None,
     light = _light_body(subject, rig0)
     # the subject's own best fit first (poses only), for the before/after residual
     poses = np.array([align_root(light, rig0, x, X, ok) for x, X, ok in zip(poses, points, oks)])
-    fixed = _JointProblem(light, [], points, oks, poses)
+    fixed = _JointProblem(light, [], points, oks, poses, landmarks=model)
     _, poses = _solve(fixed, np.zeros(0), poses, max_nfev=20)
-    rms_before = _rms(light, poses, points, oks)
-    problem = _JointProblem(light, keys, points, oks, poses)
+    rms_before = _rms(light, poses, points, oks, model)
+    problem = _JointProblem(light, keys, points, oks, poses, landmarks=model)
     log_f, poses = _solve(problem, np.zeros(len(keys)), poses, max_nfev)
     proportions = _proportions(keys, log_f)
-    rms_after = _rms(scaled_body(light, proportions), poses, points, oks)
+    rms_after = _rms(scaled_body(light, proportions), poses, points, oks, model)
     return ProportionsFit(proportions, segment_lengths(scaled_body(subject, proportions)), segment_lengths(subject),
                           [int(f) for f in frames], rms_before, rms_after, poses)
 

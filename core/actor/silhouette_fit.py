@@ -106,11 +106,11 @@ def _with(keys, z, overall):
     return Proportions(dict(zip(keys, np.exp(z))), overall)
 
 
-def refit_poses(body, proxy, cameras, masks, poses, keypoints=None, resolution=1.0):
+def refit_poses(body, proxy, cameras, masks, poses, keypoints=None, resolution=1.0, landmarks="full"):
     """Every frame's pose fitted to its masks (and its landmarks, as the tracker's local fit weighs them) by
     ICP with `body`: what the tracker's refinement would make of these frames with that body.
     keypoints: per frame KeypointTargets at the cameras' resolution, or None; resolution: the masks' scale
-    over the tracker's energy resolution (IcpSettings.at_resolution)."""
+    over the tracker's energy resolution (IcpSettings.at_resolution); landmarks: the landmark model that gave them."""
     from ..evidence.keypoints import rig_keypoints
     from ..optimizers import PoseSpace
     from ..optimizers.icp import IcpProblem, IcpSettings, IcpSolver
@@ -118,7 +118,7 @@ def refit_poses(body, proxy, cameras, masks, poses, keypoints=None, resolution=1
     space = PoseSpace.with_default_scale(body.lower, body.upper, body.dof_names,
                                          np.isin(np.arange(body.n_dof), body.translation_dofs))
     settings = IcpSettings().at_resolution(resolution)
-    rig = rig_keypoints(body) if keypoints is not None else None
+    rig = rig_keypoints(body, landmarks) if keypoints is not None else None
     out = []
     for f, (pose, frame_masks) in enumerate(zip(np.asarray(poses, float), masks)):
         problem = IcpProblem(body=body, proxy=proxy, cameras=list(cameras), silhouettes=list(frame_masks),
@@ -129,7 +129,7 @@ def refit_poses(body, proxy, cameras, masks, poses, keypoints=None, resolution=1
 
 def refine_proportions(subject, proxy, cameras, masks, poses, proportions, backend="auto", steps=STEPS,
                        pull=PULL_TO_LANDMARKS, log=None, rounds=0, keypoints=None, resolution=1.0,
-                       segments=None):
+                       segments=None, landmarks="full"):
     """Search the segment factors of `proportions` (the landmark fit) against the masks.
 
     cameras: the capture's cameras at the masks' resolution (Camera.scaled); masks: per frame a list of one
@@ -137,7 +137,7 @@ def refine_proportions(subject, proxy, cameras, masks, poses, proportions, backe
     The overall factor (head, hands, the skin's girth) stays the landmark fit's: left free, a segment would
     grow to fatten the whole body where a mask is wider than the person (shadows, loose clothes).
     segments: the segment names searched (None: all; the others keep their factor); rounds: pose refits by
-    ICP (keypoints, resolution: see refit_poses), each followed by a search; 0 holds `poses`."""
+    ICP (keypoints, resolution, landmarks: see refit_poses), each followed by a search; 0 holds `poses`."""
     log = log or (lambda msg: None)
     keys = list(proportions.factors)
     z0 = np.log([proportions.factors[k] for k in keys])
@@ -147,7 +147,7 @@ def refine_proportions(subject, proxy, cameras, masks, poses, proportions, backe
     for _ in range(max(1, rounds)):
         if rounds:  # the poses the masks want for the current body, then the body for those poses
             poses = refit_poses(*scaled_proxy(subject, proxy, _with(keys, z, overall)), cameras, masks, poses,
-                                keypoints, resolution)
+                                keypoints, resolution, landmarks)
         cost = SilhouetteCost(subject, proxy, cameras, masks, poses, backend)
 
         def objective(zs, cost=cost):
@@ -224,7 +224,7 @@ def calibration_targets(tracker, subject, frames, poses, landmarks, visibility):
 
     masks, cameras = calibration_masks(tracker, frames, poses)
     mask_scale = cameras[0].width / tracker.capture.cameras[0].width
-    rig = rig_keypoints(subject)
+    rig = rig_keypoints(subject, tracker.settings.landmarks)
     keypoints = [targets_from_landmarks(uv, vis, rig).scaled(mask_scale) for uv, vis in zip(landmarks, visibility)]
     return CalibrationTargets(masks, cameras, keypoints, mask_scale)
 
@@ -239,7 +239,8 @@ def refine_fit(fit, subject, tracker, landmarks, visibility, segments=SILHOUETTE
     mask_scale = t.mask_scale
     refinement = refine_proportions(subject, tracker.proxy, t.cameras, t.masks, fit.poses, fit.proportions,
                                     backend=tracker.settings.backend, log=log, rounds=rounds, keypoints=t.keypoints,
-                                    resolution=t.resolution(tracker), segments=segments)
+                                    resolution=t.resolution(tracker), segments=segments,
+                                    landmarks=tracker.settings.landmarks)
     return dataclasses.replace(
         fit, proportions=refinement.proportions,
         lengths=segment_lengths(scaled_body(subject, refinement.proportions)),

@@ -239,7 +239,7 @@ class EnergyModel:
     """V(x) for batches of poses against one frame's features. See the module docstring for the terms."""
 
     def __init__(self, body, proxy, cameras, weights, prior=None, scale: float = ENERGY_SCALE, backend="auto",
-                 cull="auto"):
+                 cull="auto", landmarks="full"):
         if not cameras:
             raise LikelihoodError("the energy model needs at least one camera")
         if not 0 < scale <= 1:
@@ -263,6 +263,7 @@ class EnergyModel:
         self.cull = 0 if cull == "auto" else int(cull)
         self.targets = None
         self.keypoints = None   # KeypointTargets of the current frame (learned landmarks)
+        self.landmarks = landmarks  # the landmark model whose placement the rig points follow (keypoints.py)
         self._rig_points = None
         self.color_model = None  # (S,2,K) normalised histograms
         self.color_count = None  # (S,) sample sizes M
@@ -351,7 +352,7 @@ class EnergyModel:
     @property
     def rig_points(self):
         if self._rig_points is None:
-            self._rig_points = rig_keypoints(self.body)
+            self._rig_points = rig_keypoints(self.body, self.landmarks)
         return self._rig_points
 
     def project_rig_points(self, poses):

@@ -43,6 +43,19 @@ LANDMARK_OFFSETS = {
     23: (-0.013, 0.083, -0.009), 25: (0.031, -0.037, -0.026), 27: (0.049, -0.001, 0.038),
     31: (0.051, -0.001, -0.058),
 }
+# The heavy model places the same landmarks otherwise: the elbows and knees about 0.03-0.04 trunk further in, the
+# ankles 0.04 lower, measured the same way (docs/defaults.md, "landmarks").
+HEAVY_LANDMARK_OFFSETS = {
+    0: (0.0, -0.032, -0.058),
+    11: (-0.039, -0.022, 0.040), 13: (-0.022, 0.054, 0.017), 15: (-0.053, 0.028, 0.011),
+    23: (-0.024, 0.072, -0.002), 25: (0.003, -0.031, -0.036), 27: (0.046, 0.000, -0.005),
+    31: (0.050, 0.014, -0.074),
+}
+
+
+def offsets_table(model="full"):
+    """The offsets table of the landmark model `model` (core/evidence/learned.py, LANDMARK_MODEL_FILES)."""
+    return HEAVY_LANDMARK_OFFSETS if model == "heavy" else LANDMARK_OFFSETS
 # Robust loss rho(r) = r^2 / (r^2 + sigma^2) on the distance r in units of the person's size in the view
 # (the crop side / margin): a landmark off by more than a few sigma costs ~1 whatever its distance, so
 # one wrong landmark cannot drag a limb.
@@ -113,8 +126,8 @@ def end_bone(body, role):
     return children[int(np.argmax(heads @ axis))]
 
 
-def rig_keypoints(body):
-    """The rig points of LANDMARK_POINTS for `body` (any preset)."""
+def rig_keypoints(body, model="full"):
+    """The rig points of LANDMARK_POINTS for `body` (any preset), where the landmark model `model` puts them."""
     sk = body.skeleton
     landmarks, bones, points = [], [], []
     for lm, (role, where) in LANDMARK_POINTS.items():
@@ -137,22 +150,24 @@ def rig_keypoints(body):
     where = {lm: i for i, lm in enumerate(landmarks)}
     swap = np.array([where.get(int(SWAP_ORDER[lm]), i) for i, lm in enumerate(landmarks)])
     points = np.array(points)
-    points[:, :3] += landmark_offsets(body, landmarks)
+    points[:, :3] += landmark_offsets(body, landmarks, model)
     return RigKeypoints(landmarks, np.array(bones), points, swap)
 
 
-def landmark_offsets(body, landmarks):
-    """(K,3) rest-space shift of each landmark's rig point: LANDMARK_OFFSETS, mirrored for the right side."""
+def landmark_offsets(body, landmarks, model="full"):
+    """(K,3) rest-space shift of each landmark's rig point: the model's table (offsets_table), mirrored for the
+    right side."""
     from ..body.model import body_frame
 
     sk = body.skeleton
     frame = body_frame(sk, body.roles)
     trunk = np.linalg.norm(sk.rest[sk.index[body.roles["neck"][0]], :3, 3]
                            - sk.rest[sk.index[body.roles["root"][0]], :3, 3])
+    table = offsets_table(model)
     out = np.zeros((len(landmarks), 3))
     for i, lm in enumerate(landmarks):
-        side = 1.0 if lm in LANDMARK_OFFSETS else -1.0  # the table holds the nose and the left side
-        outwards, forwards, up = LANDMARK_OFFSETS.get(int(lm), LANDMARK_OFFSETS.get(int(SWAP_ORDER[lm]), (0, 0, 0)))
+        side = 1.0 if lm in table else -1.0  # the table holds the nose and the left side
+        outwards, forwards, up = table.get(int(lm), table.get(int(SWAP_ORDER[lm]), (0, 0, 0)))
         out[i] = trunk * (side * outwards * frame.left + forwards * frame.forward + up * frame.up)
     return out
 

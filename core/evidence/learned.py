@@ -20,7 +20,11 @@ import numpy as np
 from .errors import FeatureInputError
 from .view_features import resize_mask
 
-MODEL_PATH = Path(__file__).resolve().parents[1] / "data" / "models" / "pose_landmark_full.tflite"
+MODELS_FOLDER = Path(__file__).resolve().parents[1] / "data" / "models"
+# BlazePose GHUM 3D comes in sizes: "full", the default, and "heavy", about four times its weights and three times
+# its time per crop, better where two people overlap (docs/defaults.md, "landmarks").
+LANDMARK_MODEL_FILES = {"full": "pose_landmark_full.tflite", "heavy": "pose_landmark_heavy.tflite"}
+MODEL_PATH = MODELS_FOLDER / LANDMARK_MODEL_FILES["full"]
 INPUT_SIZE = 256
 N_LANDMARKS = 33
 CROP_MARGIN = 1.35       # the crop's side over the larger side of the projected joints' box [measured, doc]
@@ -218,6 +222,13 @@ class ViewEvidence:
                    np.zeros(N_LANDMARKS), 0.0, None)
 
 
+def model_path(name="full"):
+    """The file of the landmark model `name` (a key of LANDMARK_MODEL_FILES)."""
+    if name not in LANDMARK_MODEL_FILES:
+        raise LearnedModelError(f"landmark model {name!r} is not one of {', '.join(LANDMARK_MODEL_FILES)}")
+    return MODEL_PATH if name == "full" else MODELS_FOLDER / LANDMARK_MODEL_FILES[name]
+
+
 def require_model(path=None):
     """The model file's path; a LearnedModelError naming the fix when it is missing."""
     path = Path(MODEL_PATH if path is None else path)
@@ -229,7 +240,8 @@ def require_model(path=None):
 
 
 class LandmarkModel:
-    """BlazePose 'full' landmarks + segmentation in OpenCV's DNN, batched over crops."""
+    """BlazePose landmarks + segmentation in OpenCV's DNN, batched over crops ('full' unless `path` is another
+    model's file: model_path)."""
 
     def __init__(self, path=None):
         path = require_model(path)

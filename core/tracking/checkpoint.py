@@ -116,9 +116,10 @@ def _estimates(arrays):
     return out
 
 
-# Settings added after checkpoints were first written: one written before holds none of them, and resumes with this
-# release's value (the tracker's state for it is rebuilt from the next frames; Tracker.restore).
-ADDED_SETTINGS = ("check_clothes",)
+# Settings added after checkpoints were first written, with what a checkpoint written before them was tracked with:
+# None, any value (it resumes with this run's; the tracker's state for it is rebuilt from the next frames,
+# Tracker.restore); else that value (a run before the heavy landmark model looked with the full one).
+ADDED_SETTINGS = {"check_clothes": None, "landmarks": "full"}
 
 
 def plain_settings(settings_dict):
@@ -128,11 +129,11 @@ def plain_settings(settings_dict):
 
 def same_settings(saved, current):
     """Whether a checkpoint's settings (`saved`) are the run's (`current`, both dicts), a setting added since the
-    checkpoint was written (ADDED_SETTINGS) taken as the run's."""
+    checkpoint was written taken as ADDED_SETTINGS says."""
     saved, current = plain_settings(saved), plain_settings(current)
-    for name in ADDED_SETTINGS:
+    for name, before in ADDED_SETTINGS.items():
         if name not in saved and name in current:
-            saved[name] = current[name]
+            saved[name] = current[name] if before is None else before
     return saved == current
 
 

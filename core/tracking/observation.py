@@ -123,13 +123,15 @@ class FrameObserver:
     """Observes frames for the energy. It reads nothing of the tracker's state, only the capture, the background
     models and the landmark model, so the next frame can be observed in its worker thread (prefetch / take)."""
 
-    def __init__(self, capture, body, backgrounds, scales, learned_evidence, learned_mask, diffuse, clothes=False):
+    def __init__(self, capture, body, backgrounds, scales, learned_evidence, learned_mask, diffuse, clothes=False,
+                 landmarks="full"):
         self.capture, self.body, self.backgrounds = capture, body, backgrounds
         self.clothes = clothes  # the signature of the clothes under each view's landmarks (clothes_check.py)
         self.scales = list(scales)  # the energy's resolution, then the local fit's if it is finer
         self.learned_evidence = learned_evidence  # run the landmark model
         self.learned_mask = learned_mask  # its person mask is the silhouette (else background subtraction)
         self.diffuse = diffuse  # the colour term's diffused images
+        self.landmarks = landmarks  # which landmark model (core/evidence/learned.py, LANDMARK_MODEL_FILES)
         self.landmark_model = None  # loaded on first use
         self._pool = None  # the worker
         self._pending = None  # (frame, guide, future)
@@ -157,10 +159,10 @@ class FrameObserver:
     def evidence(self, images, guide_poses):
         """Learned evidence per view, from crops around the projected joints of `guide_poses`."""
         from ..evidence.crops import evidence_around
-        from ..evidence.learned import LandmarkModel
+        from ..evidence.learned import LandmarkModel, model_path
 
         if self.landmark_model is None:
-            self.landmark_model = LandmarkModel()
+            self.landmark_model = LandmarkModel(model_path(self.landmarks))
         cams = self.capture.cameras
         frames = [images[cam.name] for cam in cams]
         evidence = evidence_around(self.landmark_model, self.body, cams, frames, guide_poses,

@@ -102,6 +102,12 @@ _BACKGROUND_WORDS = {
     "knn": ("KNN", "OpenCV's nearest-neighbour estimate of the empty scene (weaker than the median on short clips)"),
 }
 # The local fits the tracker knows (Tracker checks settings.refine against these two).
+# core/evidence/learned.py's LANDMARK_MODEL_FILES, named here so that the panel need not load OpenCV to list them
+_LANDMARK_WORDS = {
+    "full": ("Full", "BlazePose Full: the default"),
+    "heavy": ("Heavy", "BlazePose Heavy: about three times the landmark model's time per frame; better where two "
+                       "actors overlap, not with one actor and a passer-by (docs/defaults.md, \"landmarks\")"),
+}
 _REFINE_WORDS = {
     "icp": ("ICP", "After the search, fit the silhouette outlines locally: less jitter, about a second more per "
                    "frame"),
@@ -144,6 +150,8 @@ def _build_options():
         Option("background", "Background", "How the empty scene is known, for the background-subtraction "
                                            "silhouettes", d.background,
                _choices(tuple(_BACKGROUND_WORDS), _BACKGROUND_WORDS)),
+        Option("landmarks", "Landmark Model", "The learned model that finds the body's landmarks in each view",
+               d.landmarks, _choices(tuple(_LANDMARK_WORDS), _LANDMARK_WORDS)),
     )
     return {o.name: o for o in options}
 

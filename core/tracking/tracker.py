@@ -60,7 +60,7 @@ class Tracker:
         if scale is None:  # the person (as the subject is placed) about 120 energy pixels tall
             scale = energy_scale_for(body, capture.cameras, body.default_pose())
         self.energy = energy_model or EnergyModel(body, self.proxy, capture.cameras, s.likelihood, prior=prior,
-                                                  backend=s.backend, scale=scale)
+                                                  backend=s.backend, scale=scale, landmarks=s.landmarks)
         self.scale = self.energy.scale
         self.refine_scale = s.refine_scale
         if self.refine_scale is None:
@@ -81,7 +81,8 @@ class Tracker:
         scales = [self.scale] + ([self.refine_scale] if self.refines and self.refine_scale != self.scale else [])
         self.observer = FrameObserver(capture, body, self.backgrounds, scales, weights.needs_learned_evidence,
                                       weights.mask == "learned", diffuse=self.uses_color,
-                                      clothes=s.check_clothes and weights.needs_learned_evidence)
+                                      clothes=s.check_clothes and weights.needs_learned_evidence,
+                                      landmarks=s.landmarks)
         self.clothes = ClothesCheck() if self.observer.clothes else None
         self.local_fit = LocalFit(body, self.proxy, capture.cameras, self.energy, self.space, self.root, self.scale,
                                   self.refine_scale, s.refine_iterations)

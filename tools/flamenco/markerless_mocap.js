@@ -61,6 +61,8 @@ const JOB_TYPE = {
           description: "How the empty scene is known, for the background-subtraction silhouettes" },
         { key: "backend", type: "string", choices: ["auto", "numpy", "fast", "gpu"], default: "auto",
           description: "How poses are rendered on the worker (auto: its GPU if it has one, else compiled CPU)" },
+        { key: "landmarks", type: "string", choices: ["full", "heavy"], default: "full",
+          description: "The learned model that finds the body's landmarks in each view (heavy: slower)" },
         // How a worker runs the add-on's command line: Blender with the extension installed, or a Python with the
         // package (the manager's variable {mocap_python}, one value per platform).
         { key: "runner", type: "string", choices: ["blender", "python"], default: "blender",
@@ -77,7 +79,7 @@ const RUNNERS = {
 };
 // Tracking options passed to track-chunk and stitch alike: the chunk folders are named by a hash of them.
 const TRACKING_OPTIONS = ["preset", "particles", "iterations", "seed", "algorithm", "likelihood", "refine",
-                          "background", "backend"];
+                          "background", "backend", "landmarks"];
 // `batch` keeps the chunk folders in OUT/_chunks, so a take may not be called that.
 const CHUNKS_FOLDER = "_chunks";
 // Frames an actor's build is fitted on, from the take's first (core/actor/frames.py DEFAULT_FRAMES); a shorter take
