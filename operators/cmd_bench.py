@@ -55,6 +55,8 @@ def add_arguments(parser):
                         help="also time two actors tracked together against each alone on SCENE's first frames (a "
                              "folder with a subject.blend of two armatures and its capture, such as "
                              "sample_scenes/duet)")
+    parser.add_argument("--landmarks", default="full", choices=OPTIONS["landmarks"].values,
+                        help="the landmark model of the --two-actors timing (default full)")
     parser.add_argument("--iterations", type=int, default=15,
                         help="annealing iterations per frame for the per-frame figures (default 15: 200 x 15 = "
                              "the paper's 3000 evaluations)")
@@ -368,8 +370,8 @@ def run(args):
     if args.two_actors is not None:
         from .bench_cast import cast_seconds
 
-        two_actors = cast_seconds(args.two_actors)
-        names = ", ".join(two_actors["armatures"])
+        two_actors = cast_seconds(args.two_actors, landmarks=args.landmarks)
+        names = ", ".join(two_actors["armatures"]) + f"; landmarks: {args.landmarks}"
         print(f"two actors ({names}) tracked together: {two_actors['two_s_per_frame']:.2f} s per frame against "
               f"one alone {two_actors['one_s_per_frame']:.2f}, the mean of the two ({two_actors['ratio']:.2f}x)")
     print(json.dumps({**table, "auto_backend": auto_backend, "default_s_per_frame": default, "two_actors": two_actors,
