@@ -105,8 +105,8 @@ _BACKGROUND_WORDS = {
 # core/evidence/learned.py's LANDMARK_MODEL_FILES, named here so that the panel need not load OpenCV to list them
 _LANDMARK_WORDS = {
     "full": ("Full", "BlazePose Full: the default"),
-    "heavy": ("Heavy", "BlazePose Heavy: about three times the landmark model's time per frame; better where two "
-                       "actors overlap, not with one actor and a passer-by (docs/defaults.md, \"landmarks\")"),
+    "heavy": ("Heavy", "BlazePose Heavy: about 15 % more time per frame; better where two actors overlap "
+                       "(docs/defaults.md, \"landmarks\")"),
 }
 _REFINE_WORDS = {
     "icp": ("ICP", "After the search, fit the silhouette outlines locally: less jitter, about a second more per "

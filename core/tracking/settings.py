@@ -66,8 +66,8 @@ class TrackingSettings:
     # Place (and observe) frame t+1's crops before frame t's search rather than after it: a short search leaves
     # the worker too little time after it (docs/defaults.md, "observe_early").
     observe_early: bool = False
-    # The landmark model: BlazePose "full", or "heavy" (three times slower, better where two actors overlap:
-    # docs/defaults.md, "landmarks").
+    # The landmark model: BlazePose "full", or "heavy" (three times its time per crop, about 15 % more per frame;
+    # better where two actors overlap: docs/defaults.md, "landmarks").
     landmarks: str = "full"
     optimizer_options: dict = field(default_factory=dict)
 
