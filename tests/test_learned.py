@@ -76,14 +76,18 @@ def test_an_unknown_landmark_model_names_the_ones_there_are():
 
 
 def test_the_options_landmark_models_are_the_model_files():
-    """The panel's and the command line's Landmark Model lists exactly the model files that ship."""
+    """The panel's and the command line's Landmark Model lists exactly the model files that ship, each with its
+    offsets table; a model without one is refused."""
+    from markerless_mocap.core.evidence.keypoints import OFFSETS_OF_MODEL, KeypointMapError, offsets_table
     from markerless_mocap.core.evidence.learned import LANDMARK_MODEL_FILES, model_path
     from markerless_mocap.core.tracking.options import OPTIONS
 
-    assert OPTIONS["landmarks"].values == tuple(LANDMARK_MODEL_FILES)
+    assert OPTIONS["landmarks"].values == tuple(LANDMARK_MODEL_FILES) == tuple(OFFSETS_OF_MODEL)
     assert OPTIONS["landmarks"].default == "full"
     for name in LANDMARK_MODEL_FILES:
         assert model_path(name).is_file()
+    with pytest.raises(KeypointMapError, match="no offsets table"):
+        offsets_table("lite")
 
 
 # ------------------------------------------------------------------------------------------ the model on a frame

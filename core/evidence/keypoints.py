@@ -53,9 +53,16 @@ HEAVY_LANDMARK_OFFSETS = {
 }
 
 
+OFFSETS_OF_MODEL = {"full": LANDMARK_OFFSETS, "heavy": HEAVY_LANDMARK_OFFSETS}
+
+
 def offsets_table(model="full"):
-    """The offsets table of the landmark model `model` (core/evidence/learned.py, LANDMARK_MODEL_FILES)."""
-    return HEAVY_LANDMARK_OFFSETS if model == "heavy" else LANDMARK_OFFSETS
+    """The offsets table of the landmark model `model` (core/evidence/learned.py, LANDMARK_MODEL_FILES): a model
+    without a table of its own is refused, not given another model's."""
+    if model not in OFFSETS_OF_MODEL:
+        raise KeypointMapError(f"landmark model {model!r} has no offsets table; the tables are for "
+                               f"{', '.join(OFFSETS_OF_MODEL)}")
+    return OFFSETS_OF_MODEL[model]
 # Robust loss rho(r) = r^2 / (r^2 + sigma^2) on the distance r in units of the person's size in the view
 # (the crop side / margin): a landmark off by more than a few sigma costs ~1 whatever its distance, so
 # one wrong landmark cannot drag a limb.
