@@ -147,7 +147,9 @@ def _old_folder(tmp_path):
 
 def test_a_checkpoint_pkl_from_before_the_packages_is_converted(tmp_path):
     out, settings = _old_folder(tmp_path)
-    with pytest.raises(checkpoint.CheckpointError, match="the earlier run used different settings"):
+    # the message names the setting that differs and the option that gives it back
+    with pytest.raises(checkpoint.CheckpointError, match=r"the earlier run used different settings: seed 0 \(this "
+                       r"run: 1\); resume with the options it used \(--seed 0\) or choose another --out"):
         ResultWriter(out, None, TrackingSettings(**{**settings.to_dict(), "seed": 1})).load_checkpoint()
     assert (out / "checkpoint.pkl").exists() and not (out / "checkpoint.npz").exists()  # refused: left as it was
 
@@ -196,7 +198,7 @@ def test_a_checkpoint_pkl_from_before_the_packages_resumes(tmp_path):
 def test_a_checkpoint_from_before_a_setting_existed_resumes_as_it_was_tracked():
     """A checkpoint written before `landmarks` existed was tracked with the full model: it resumes with full and is
     refused with heavy (the frames before would not be the heavy model's); `check_clothes` takes the run's value."""
-    from markerless_mocap.core.tracking.checkpoint import same_settings
+    from markerless_mocap.core.tracking.checkpoint import same_settings, setting_differences
     from markerless_mocap.core.tracking.settings import TrackingSettings
 
     old = TrackingSettings().to_dict()
@@ -205,3 +207,4 @@ def test_a_checkpoint_from_before_a_setting_existed_resumes_as_it_was_tracked():
     assert same_settings(old, TrackingSettings(check_clothes=False).to_dict())
     assert not same_settings(old, TrackingSettings(landmarks="heavy").to_dict())
     assert not same_settings(TrackingSettings().to_dict(), TrackingSettings(landmarks="heavy").to_dict())
+    assert setting_differences(old, TrackingSettings(landmarks="heavy").to_dict()) == {"landmarks": ("full", "heavy")}

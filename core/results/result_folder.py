@@ -235,10 +235,11 @@ class ResultWriter:
         if not path.exists():
             return None, None
         estimates, state, settings = (checkpoint.read_legacy if legacy else checkpoint.read)(path)
-        if not checkpoint.same_settings(settings, self.settings.to_dict()):
-            raise checkpoint.CheckpointError(
-                f"{path}: the earlier run used different settings ({settings}); resume with the same options or "
-                "choose another --out")
+        differences = checkpoint.setting_differences(settings, self.settings.to_dict())
+        if differences:
+            raise checkpoint.CheckpointError(f"{path}: the earlier run used different settings: "
+                                             f"{_settings_told(differences)}; resume with the options it used "
+                                             f"{_options_told(differences)}or choose another --out")
         self.estimates = list(estimates)
         if legacy:
             try:
@@ -252,6 +253,19 @@ def load_joints(path):
     """joints.npz or gt_joints.npz -> (names list, frames (F,), positions (F,J,3))."""
     with np.load(path) as data:
         return [str(n) for n in data["names"]], data["frames"].astype(np.int64), data["positions"]
+
+
+def _settings_told(differences):
+    return ", ".join(f"{name} {was!r} (this run: {now!r})" for name, (was, now) in differences.items())
+
+
+def _options_told(differences):
+    """The command-line options that give back a checkpoint's settings, e.g. "(--landmarks full) ", where the
+    settings that differ are options."""
+    from ..tracking.options import OPTIONS
+
+    flags = [f"--{name} {was}" for name, (was, _) in differences.items() if name in OPTIONS and was is not None]
+    return f"({' '.join(flags)}) " if flags else ""
 
 
 __all__ = ["ResultWriter", "ResultWriteError", "atomic_path", "load_joints", "software_versions"]

@@ -127,14 +127,21 @@ def plain_settings(settings_dict):
     return json.loads(json.dumps(settings_dict))
 
 
-def same_settings(saved, current):
-    """Whether a checkpoint's settings (`saved`) are the run's (`current`, both dicts), a setting added since the
-    checkpoint was written taken as ADDED_SETTINGS says."""
+def setting_differences(saved, current):
+    """{name: (the checkpoint's value, this run's)} of the settings in which a checkpoint's run (`saved`) differs
+    from this run (`current`, both dicts), a setting added since the checkpoint was written taken as ADDED_SETTINGS
+    says; a setting one side lacks is None there."""
     saved, current = plain_settings(saved), plain_settings(current)
     for name, before in ADDED_SETTINGS.items():
         if name not in saved and name in current:
             saved[name] = current[name] if before is None else before
-    return saved == current
+    return {name: (saved.get(name), current.get(name)) for name in sorted(set(saved) | set(current))
+            if saved.get(name) != current.get(name)}
+
+
+def same_settings(saved, current):
+    """Whether a checkpoint's settings (`saved`) are the run's (`current`): setting_differences finds none."""
+    return not setting_differences(saved, current)
 
 
 def write(fh, estimates, state, settings_dict):
