@@ -205,6 +205,9 @@ done
 run_in python3 -c 'import numpy; z = numpy.load("/mnt/out/command_result/joints.npz"); f = list(z["frames"]); assert f == [0, 1, 2], f' \
   || fail "joints.npz of the --command run does not hold frames 0-2"
 grep -q "^Frames: 3" "$out/command_result/animation.bvh" || fail "animation.bvh does not hold 3 frames"
+# the default landmark model (heavy) is what the installed extension tracked with
+python3 -c 'import json, sys; m = json.load(open(sys.argv[1]))["settings"]["landmarks"]; assert m == "heavy", m' \
+  "$out/command_result/report.json" || fail "the --command run did not track with the default heavy landmark model"
 # the same files as the Python-module command (bpy 5.0.1 in .venv)
 "$venv_py" -m markerless_mocap "${track_args[@]/$src/$repo}" --scene "$repo/sample_scenes/walk/subject.blend" --out "$out/module_result" > "$out/module.log" 2>&1 \
   || fail "python -m markerless_mocap track failed; see $out/module.log"

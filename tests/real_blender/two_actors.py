@@ -2,12 +2,13 @@
 `blender duet/subject.blend --python two_actors.py -- CAPTURE OUT` (with `-b`: the operator's synchronous path).
 
 What a user does in the Subject and Track panels for several actors: tick 'Track Every Armature', set the capture
-and output folders and a short frame range, measure one actor's height on its armature, press Track with Fit the
-Actor's Build on (the default) and 3 calibration frames: each actor's build is fitted in turn (in the UI the modal
+and output folders and a short frame range, measure one actor's height on its armature, choose the Full landmark
+model (not the default: the property must reach both actors' fits and tracking), press Track with Fit the Actor's
+Build on (the default) and 3 calibration frames: each actor's build is fitted in turn (in the UI the modal
 calibration, one actor after the other), then both are tracked (the modal Track), watched from a timer as the
 window keeps drawing. Both actors' fits must be saved in their result folders (actors/<armature>/actor.json, made
 on this capture; the measured actor's with its measured height), both armatures keyed on every tracked frame, each
-actor's result folder written, the UI never stalled more than 5 s.
+actor's result folder written and tracked with the full model, the UI never stalled more than 5 s.
 """
 import json
 import sys
@@ -25,6 +26,7 @@ m.output_dir = out
 m.use_frame_range, m.frame_start, m.frame_end = True, 0, 2
 m.preset = "preview"
 m.fit_actor_build, m.calibrate_frames = True, 3
+m.landmarks = "full"
 MEASURED = {armatures[-1]: 1.62}  # one actor's measured height, on its own armature (Subject panel, under its name)
 for name, height in MEASURED.items():
     bpy.context.scene.objects[name].mocap_measured.actor_height = height
@@ -47,7 +49,10 @@ def check_and_end(result):
         if name in MEASURED:  # the measured height is this actor's, not the footage's
             height = saved.get("height_m")
             report.setdefault("measured_height_m", {})[name] = None if height is None else round(height, 4)
+        tracked = Path(out) / "actors" / name / "report.json"
+        model = json.loads(tracked.read_text()).get("settings", {}).get("landmarks") if tracked.is_file() else None
         report["keys"][name] = {"keyed": arm.animation_data is not None and arm.animation_data.action is not None,
+                                "landmarks": model,
                                 "hips": frames, "folder": (Path(out) / "actors" / name / "joints.npz").is_file(),
                                 "fitted": made_on is not None and Path(made_on).resolve() == Path(capture).resolve()}
     gaps = [b - a for a, b in zip(state["ticks"], state["ticks"][1:])]
@@ -56,7 +61,8 @@ def check_and_end(result):
     started = ["FINISHED"]
     ok = (report["result"] == started and len(armatures) == 2 and m.status.startswith("Tracked 3 frames")
           and (bpy.app.background or state["calibrating_seen"])
-          and all(k["keyed"] and k["folder"] and k["fitted"] for k in report["keys"].values())
+          and all(k["keyed"] and k["folder"] and k["fitted"] and k["landmarks"] == "full"
+                  for k in report["keys"].values())
           and (Path(out) / "tracked.blend").is_file()
           and all(abs((report.get("measured_height_m", {}).get(n) or 0) - h) < 1e-3 for n, h in MEASURED.items())
           and (bpy.app.background or (report["max_ui_gap_s"] is not None and report["max_ui_gap_s"] < 5)))
@@ -66,7 +72,8 @@ def check_and_end(result):
     how = "modal, in the UI" if not bpy.app.background else "in the background"
     print(f"STAGE two actors from the Track panel ({how}): {'keyed both' if ok else 'FAILED'} ({', '.join(armatures)}; "
           f"{m.status!r}; builds fitted: {sum(k['fitted'] for k in report['keys'].values())}, measured heights kept: "
-          f"{report.get('measured_height_m')}; hips {apart:.2f} m apart "
+          f"{report.get('measured_height_m')}; landmark models "
+          f"{[k['landmarks'] for k in report['keys'].values()]}; hips {apart:.2f} m apart "
           f"at the first frame; longest UI gap {report['max_ui_gap_s']} s) "
           f"{m.last_error}", flush=True)
     print("STAGE-JSON " + json.dumps(report), flush=True)
