@@ -23,10 +23,10 @@ def _seconds_per_tracked_frame(session):
     return sum(times[2:]) / max(1, len(times) - 2)
 
 
-def cast_seconds(scene_dir, frames=6, seed=0, landmarks="full"):
+def cast_seconds(scene_dir, frames=6, seed=0, landmarks=None):
     """{"one_s_per_frame", "two_s_per_frame", "ratio", "frames", "armatures", "landmarks"} on `scene_dir` (its
     subject.blend holds at least two armatures; the first two by name are timed): `frames` timed frames each, with
-    the landmark model `landmarks`."""
+    the landmark model `landmarks` (None: the tracker's default)."""
     import bpy
 
     from ..addon.scene_bridge import scene_armatures
@@ -42,7 +42,7 @@ def cast_seconds(scene_dir, frames=6, seed=0, landmarks="full"):
         raise CastError(f"{scene_dir / 'subject.blend'} has fewer than two armatures: --two-actors needs a scene "
                         "with two, such as sample_scenes/duet")
     options = dict(frames=range(frames + 2), smooth_hz=0, foot_lock=False)
-    settings = TrackingSettings(seed=seed, landmarks=landmarks)
+    settings = TrackingSettings(seed=seed, **({} if landmarks is None else {"landmarks": landmarks}))
     with tempfile.TemporaryDirectory() as tmp:
         alone = [_seconds_per_tracked_frame(TrackSession(scene, a, scene_dir, Path(tmp) / a.name,
                                                          settings, **options)) for a in armatures]
@@ -50,4 +50,4 @@ def cast_seconds(scene_dir, frames=6, seed=0, landmarks="full"):
         two = _seconds_per_tracked_frame(CastSession(scene, armatures, scene_dir, Path(tmp) / "two",
                                                      settings=settings, **options))
     return {"one_s_per_frame": round(one, 3), "two_s_per_frame": round(two, 3), "ratio": round(two / one, 2),
-            "frames": frames, "armatures": [a.name for a in armatures], "landmarks": landmarks}
+            "frames": frames, "armatures": [a.name for a in armatures], "landmarks": settings.landmarks}

@@ -55,8 +55,9 @@ def add_arguments(parser):
                         help="also time two actors tracked together against each alone on SCENE's first frames (a "
                              "folder with a subject.blend of two armatures and its capture, such as "
                              "sample_scenes/duet)")
-    parser.add_argument("--landmarks", default="full", choices=OPTIONS["landmarks"].values,
-                        help="the landmark model of the --two-actors timing (default full)")
+    parser.add_argument("--landmarks", default=OPTIONS["landmarks"].default, choices=OPTIONS["landmarks"].values,
+                        help=f"the landmark model of the --two-actors timing (default {OPTIONS['landmarks'].default}, "
+                             "the tracker's)")
     parser.add_argument("--iterations", type=int, default=15,
                         help="annealing iterations per frame for the per-frame figures (default 15: 200 x 15 = "
                              "the paper's 3000 evaluations)")

@@ -18,8 +18,10 @@ from markerless_mocap.core.tracking import checkpoint
 from markerless_mocap.core.tracking.settings import FrameEstimate, TrackingSettings
 
 OLD_FOLDER = Path(__file__).resolve().parent / "data" / "checkpoint_before_layout"
-# The options that folder was tracked with (frames 0-2 of the walk scene); auto chose the "fast" backend there.
-OLD_OPTIONS = ["--seed", "0", "--no-export", "--no-overlays", "--preset", "preview", "--backend", "fast"]
+# The options that folder was tracked with (frames 0-2 of the walk scene); auto chose the "fast" backend there, and
+# the landmark model was the full one (the only one then).
+OLD_OPTIONS = ["--seed", "0", "--no-export", "--no-overlays", "--preset", "preview", "--backend", "fast",
+               "--landmarks", "full"]
 D = 4
 # Per optimiser: its own options at a small budget, so each of two frames moves its particles and random generator.
 OPTIMIZERS = {"isa": {"n": 20}, "apf": {"n": 20}, "pf": {}, "fsa": {}}
@@ -141,7 +143,7 @@ def test_a_state_that_is_not_plain_data_is_a_bug_not_a_user_error(tmp_path):
 def _old_folder(tmp_path):
     out = tmp_path / "result"
     shutil.copytree(OLD_FOLDER, out)
-    settings = TrackingSettings(**json.loads((out / "report.json").read_text())["settings"])
+    settings = TrackingSettings(**{"landmarks": "full", **json.loads((out / "report.json").read_text())["settings"]})
     return out, settings
 
 
@@ -201,10 +203,12 @@ def test_a_checkpoint_from_before_a_setting_existed_resumes_as_it_was_tracked():
     from markerless_mocap.core.tracking.checkpoint import same_settings, setting_differences
     from markerless_mocap.core.tracking.settings import TrackingSettings
 
-    old = TrackingSettings().to_dict()
+    full = TrackingSettings(landmarks="full")
+    old = full.to_dict()
     del old["landmarks"], old["check_clothes"]
-    assert same_settings(old, TrackingSettings().to_dict())
-    assert same_settings(old, TrackingSettings(check_clothes=False).to_dict())
+    assert same_settings(old, full.to_dict())
+    assert same_settings(old, TrackingSettings(landmarks="full", check_clothes=False).to_dict())
     assert not same_settings(old, TrackingSettings(landmarks="heavy").to_dict())
-    assert not same_settings(TrackingSettings().to_dict(), TrackingSettings(landmarks="heavy").to_dict())
-    assert setting_differences(old, TrackingSettings(landmarks="heavy").to_dict()) == {"landmarks": ("full", "heavy")}
+    assert not same_settings(full.to_dict(), TrackingSettings(landmarks="heavy").to_dict())
+    # heavy became the default after: resuming such a run with the defaults is refused, naming the option to add
+    assert setting_differences(old, TrackingSettings().to_dict()) == {"landmarks": ("full", "heavy")}
