@@ -66,8 +66,8 @@ class TrackingSettings:
     # Place (and observe) frame t+1's crops before frame t's search rather than after it: a short search leaves
     # the worker too little time after it (docs/defaults.md, "observe_early").
     observe_early: bool = False
-    # The landmark model: BlazePose "heavy", or "full" (a third of heavy's time per crop, about 10 % less per
-    # frame; heavy tracks better on every scene measured but one: docs/defaults.md, "landmarks").
+    # The landmark model: BlazePose "heavy", or "full" (a third of heavy's time per crop, about a fifth less per
+    # frame; heavy tracks better on every scene measured but two: docs/defaults.md, "landmarks").
     landmarks: str = "heavy"
     optimizer_options: dict = field(default_factory=dict)
 
