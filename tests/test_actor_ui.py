@@ -193,7 +193,8 @@ def test_track_calibrate_round_trip_on_the_actor_scene(tmp_path):
     assert list(check["mismatch"]) == ["rig", "uniform" if check["height"]["taken"] else "halfway"]
     assert check["chosen"] == min(check["mismatch"], key=check["mismatch"].get)
     fitted = check["fitted_factors"]
-    assert {k for k, v in fitted.items() if v != refined["landmark_factors"][k]} <= {"forearm", "hip_width"}
+    changed = {k for k, v in fitted.items() if abs(v - refined["landmark_factors"][k]) > 1e-9}  # not the last bit
+    assert changed <= {"forearm", "hip_width"}
     assert f"it matches the person masks best (mask mismatch rig {check['mismatch']['rig']:.3f}" in run.stderr
     # the trunk/leg split and the hip width were searched on their grids, and the summary says what they set
     assert len(check["split"]["grid"]) == 7 and len(check["hip_width"]["grid"]) == 9

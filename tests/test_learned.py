@@ -441,17 +441,23 @@ def test_energy_resolution_follows_the_person_not_the_footage(walk_truth):
     assert 0.1 < scale < 0.25
 
 
-def test_track_without_the_model_file_says_so_and_how_to_fix_it(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("model", [None, "full"])
+def test_track_without_the_model_file_says_so_and_how_to_fix_it(tmp_path, monkeypatch, capsys, model):
+    """The default model's file missing, or the one --landmarks asks for: a message naming it and the fix."""
     pytest.importorskip("bpy")
     from markerless_mocap.core.evidence import learned
+    from markerless_mocap.core.tracking.settings import TrackingSettings
     from markerless_mocap.operators.cli import main
 
     monkeypatch.setattr(learned, "MODEL_PATH", tmp_path / "missing.tflite")
+    monkeypatch.setattr(learned, "MODELS_FOLDER", tmp_path)
+    chosen = [] if model is None else ["--landmarks", model]
     code = main(["track", "--scene", str(scene_dir("walk") / "subject.blend"), "--capture", str(scene_dir("walk")),
-                 "--out", str(tmp_path / "out"), "--frames", "0-1", "--likelihood", "lsilh+edge+kp"])
+                 "--out", str(tmp_path / "out"), "--frames", "0-1", "--likelihood", "lsilh+edge+kp", *chosen])
     err = capsys.readouterr().err
     assert code == 2
     assert "landmark model" in err and "reinstall the extension" in err and "Traceback" not in err
+    assert learned.model_path(model or TrackingSettings().landmarks).name in err
 
 
 def test_agreement_figures_of_a_model_on_and_off_the_person(walk_truth):
