@@ -21,8 +21,8 @@ from .errors import FeatureInputError
 from .view_features import resize_mask
 
 MODELS_FOLDER = Path(__file__).resolve().parents[1] / "data" / "models"
-# BlazePose GHUM 3D comes in sizes: "full", the default, and "heavy", about four times its weights and three times
-# its time per crop, better where two people overlap (docs/defaults.md, "landmarks").
+# BlazePose GHUM 3D comes in sizes: "full", and "heavy" (the tracker's default), about four times full's weights and
+# three times its time per crop (docs/defaults.md, "landmarks").
 LANDMARK_MODEL_FILES = {"full": "pose_landmark_full.tflite", "heavy": "pose_landmark_heavy.tflite"}
 MODEL_PATH = MODELS_FOLDER / LANDMARK_MODEL_FILES["full"]
 INPUT_SIZE = 256

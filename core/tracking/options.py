@@ -101,13 +101,13 @@ _BACKGROUND_WORDS = {
                      "clips)"),
     "knn": ("KNN", "OpenCV's nearest-neighbour estimate of the empty scene (weaker than the median on short clips)"),
 }
-# The local fits the tracker knows (Tracker checks settings.refine against these two).
 # core/evidence/learned.py's LANDMARK_MODEL_FILES, named here so that the panel need not load OpenCV to list them
 _LANDMARK_WORDS = {
-    "full": ("Full", "BlazePose Full: the default"),
-    "heavy": ("Heavy", "BlazePose Heavy: about 15 % more time per frame; better where two actors overlap "
+    "full": ("Full", "BlazePose Full: about a fifth less time per frame than Heavy, nearly half for Preview"),
+    "heavy": ("Heavy", "BlazePose Heavy: the default, better on every sample scene but two "
                        "(docs/defaults.md, \"landmarks\")"),
 }
+# The local fits the tracker knows (Tracker checks settings.refine against these two).
 _REFINE_WORDS = {
     "icp": ("ICP", "After the search, fit the silhouette outlines locally: less jitter, about a second more per "
                    "frame"),
