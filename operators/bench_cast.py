@@ -26,11 +26,11 @@ def _seconds_per_tracked_frame(session):
 def cast_seconds(scene_dir, frames=6, seed=0, landmarks=None):
     """{"one_s_per_frame", "two_s_per_frame", "ratio", "frames", "armatures", "landmarks"} on `scene_dir` (its
     subject.blend holds at least two armatures; the first two by name are timed): `frames` timed frames each, with
-    the landmark model `landmarks` (None: the tracker's default)."""
+    the landmark model `landmarks` (None or "auto": the Full preset's)."""
     import bpy
 
     from ..addon.scene_bridge import scene_armatures
-    from ..core.tracking.settings import TrackingSettings
+    from ..core.tracking.options import settings_from_choices
     from .cast_session import CastError, CastSession
     from .track_session import TrackSession
 
@@ -42,7 +42,7 @@ def cast_seconds(scene_dir, frames=6, seed=0, landmarks=None):
         raise CastError(f"{scene_dir / 'subject.blend'} has fewer than two armatures: --two-actors needs a scene "
                         "with two, such as sample_scenes/duet")
     options = dict(frames=range(frames + 2), smooth_hz=0, foot_lock=False)
-    settings = TrackingSettings(seed=seed, **({} if landmarks is None else {"landmarks": landmarks}))
+    settings = settings_from_choices({"seed": seed, "landmarks": landmarks})
     with tempfile.TemporaryDirectory() as tmp:
         alone = [_seconds_per_tracked_frame(TrackSession(scene, a, scene_dir, Path(tmp) / a.name,
                                                          settings, **options)) for a in armatures]

@@ -57,7 +57,7 @@ def add_arguments(parser):
                              "sample_scenes/duet)")
     parser.add_argument("--landmarks", default=OPTIONS["landmarks"].default, choices=OPTIONS["landmarks"].values,
                         help=f"the landmark model of the --two-actors timing (default {OPTIONS['landmarks'].default}, "
-                             "the tracker's)")
+                             "the Full preset's)")
     parser.add_argument("--iterations", type=int, default=15,
                         help="annealing iterations per frame for the per-frame figures (default 15: 200 x 15 = "
                              "the paper's 3000 evaluations)")
@@ -372,7 +372,7 @@ def run(args):
         from .bench_cast import cast_seconds
 
         two_actors = cast_seconds(args.two_actors, landmarks=args.landmarks)
-        names = ", ".join(two_actors["armatures"]) + f"; landmarks: {args.landmarks}"
+        names = ", ".join(two_actors["armatures"]) + f"; landmarks: {two_actors['landmarks']}"
         print(f"two actors ({names}) tracked together: {two_actors['two_s_per_frame']:.2f} s per frame against "
               f"one alone {two_actors['one_s_per_frame']:.2f}, the mean of the two ({two_actors['ratio']:.2f}x)")
     print(json.dumps({**table, "auto_backend": auto_backend, "default_s_per_frame": default, "two_actors": two_actors,

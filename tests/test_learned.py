@@ -82,8 +82,9 @@ def test_the_options_landmark_models_are_the_model_files():
     from markerless_mocap.core.evidence.learned import LANDMARK_MODEL_FILES, model_path
     from markerless_mocap.core.tracking.options import OPTIONS
 
-    assert OPTIONS["landmarks"].values == tuple(LANDMARK_MODEL_FILES) == tuple(OFFSETS_OF_MODEL)
-    assert OPTIONS["landmarks"].default == "heavy"  # docs/defaults.md, "landmarks"
+    assert OPTIONS["landmarks"].values == ("auto", *LANDMARK_MODEL_FILES)
+    assert tuple(LANDMARK_MODEL_FILES) == tuple(OFFSETS_OF_MODEL)
+    assert OPTIONS["landmarks"].default == "auto"  # the preset's: docs/defaults.md, "landmarks"
     for name in LANDMARK_MODEL_FILES:
         assert model_path(name).is_file()
     with pytest.raises(KeypointMapError, match="no offsets table"):

@@ -32,13 +32,24 @@ def test_the_options_are_the_engines_registries_in_order():
     assert values["backend"] == tuple(render.BACKENDS)
     defaults = {name: o.default for name, o in options.OPTIONS.items()}
     plain = TrackingSettings()
-    assert {k: v for k, v in defaults.items() if k != "preset"} == {k: getattr(plain, k) for k in defaults
-                                                                     if k != "preset"}
+    chosen_by_preset = ("preset", "landmarks")  # "auto": the preset's model
+    assert {k: v for k, v in defaults.items() if k not in chosen_by_preset} == {
+        k: getattr(plain, k) for k in defaults if k not in chosen_by_preset}
     assert defaults["algorithm"] == optimizers.DEFAULT_OPTIMIZER
     assert TrackingSettings.preset(defaults["preset"]) == plain  # the default preset is the settings' defaults
     for option in options.OPTIONS.values():  # every value has words a person reads
         assert option.label and option.description
         assert all(c.label and c.description for c in option.choices)
+
+
+@pytest.mark.parametrize("preset, chosen, used", [("full", "auto", "heavy"), ("preview", "auto", "full"),
+                                                  ("preview", "heavy", "heavy"), ("full", "full", "full")])
+def test_the_landmark_model_auto_is_the_presets(preset, chosen, used):
+    """Preview's own model is full (heavy nearly doubles its time: docs/defaults.md, "landmarks"); a model chosen
+    by name is used whatever the preset, on the command line as on the panel's mapping."""
+    assert options.settings_from_choices({"preset": preset, "landmarks": chosen}).landmarks == used
+    args = _cli_args({"preset": preset, "landmarks": chosen})
+    assert cmd_track.settings_from_args(args).landmarks == used
 
 
 @pytest.mark.parametrize("method", [v for v in options.OPTIONS["background"].values if v not in ("auto", "plate")])

@@ -101,10 +101,12 @@ _BACKGROUND_WORDS = {
                      "clips)"),
     "knn": ("KNN", "OpenCV's nearest-neighbour estimate of the empty scene (weaker than the median on short clips)"),
 }
-# core/evidence/learned.py's LANDMARK_MODEL_FILES, named here so that the panel need not load OpenCV to list them
+# core/evidence/learned.py's LANDMARK_MODEL_FILES, named here so that the panel need not load OpenCV to list them,
+# and "auto": the preset's model (PRESETS)
 _LANDMARK_WORDS = {
+    "auto": ("Auto", "The preset's: Heavy for Full, Full for Preview (Heavy nearly doubles Preview's time)"),
     "full": ("Full", "BlazePose Full: about a fifth less time per frame than Heavy, nearly half for Preview"),
-    "heavy": ("Heavy", "BlazePose Heavy: the default, better on every sample scene but two "
+    "heavy": ("Heavy", "BlazePose Heavy: the Full preset's, better on every sample scene but two "
                        "(docs/defaults.md, \"landmarks\")"),
 }
 # The local fits the tracker knows (Tracker checks settings.refine against these two).
@@ -151,7 +153,7 @@ def _build_options():
                                            "silhouettes", d.background,
                _choices(tuple(_BACKGROUND_WORDS), _BACKGROUND_WORDS)),
         Option("landmarks", "Landmark Model", "The learned model that finds the body's landmarks in each view",
-               d.landmarks, _choices(tuple(_LANDMARK_WORDS), _LANDMARK_WORDS)),
+               "auto", _choices(tuple(_LANDMARK_WORDS), _LANDMARK_WORDS)),
     )
     return {o.name: o for o in options}
 
@@ -164,8 +166,9 @@ def settings_from_choices(choices, **overrides):
     """TrackingSettings from the user's choices: a mapping or an object (the panel's scene.mocap, the command
     line's parsed arguments) holding every one of CHOICE_NAMES (an object lacking one is an AttributeError: a
     choice one side forgets must not fall back to a default unseen); a mapping may leave some out. The preset comes
-    first and the other choices override it; a number left None keeps the preset's. `refine` may be the panel's
-    checkbox (True: "icp"). `overrides` (None ignored) replace choices: the backend a run resolved "auto" to."""
+    first and the other choices override it; a number left None keeps the preset's, and so does the landmark
+    model "auto". `refine` may be the panel's checkbox (True: "icp"). `overrides` (None ignored) replace choices:
+    the backend a run resolved "auto" to."""
     unknown = set(overrides) - set(CHOICE_NAMES)
     if unknown:
         raise TypeError(f"settings_from_choices: no choice named {', '.join(sorted(unknown))}")
@@ -178,6 +181,8 @@ def settings_from_choices(choices, **overrides):
     values = {name: get(name) for name in CHOICE_NAMES}
     if isinstance(values["refine"], bool):
         values["refine"] = "icp" if values["refine"] else "none"
+    if values["landmarks"] == "auto":
+        values["landmarks"] = None  # the preset's model
     for name, value in values.items():
         if value is not None:
             OPTIONS[name].check(value)

@@ -90,11 +90,12 @@ class TrackingSettings:
 # Named settings. "full": the paper's budget with the local fit on finer silhouettes (the default).
 # "preview": for a quick look at a take, a sixtieth of the search (50 particles x 4 iterations) and the local
 # fit at the search's resolution; the landmarks and the local fit do most of the work there (docs/speed.md:
-# its seconds per frame and accuracy on every sample scene).
+# its seconds per frame and accuracy on every sample scene). Its landmarks come from the full model: heavy's three
+# times longer crops nearly double preview's time (docs/defaults.md, "landmarks").
 PRESETS = {
     "full": {},
     "preview": {"particles": 50, "iterations": 4, "fine_refine": False, "refine_iterations": 6,
-                "observe_early": True},
+                "observe_early": True, "landmarks": "full"},
 }
 
 

@@ -61,8 +61,9 @@ const JOB_TYPE = {
           description: "How the empty scene is known, for the background-subtraction silhouettes" },
         { key: "backend", type: "string", choices: ["auto", "numpy", "fast", "gpu"], default: "auto",
           description: "How poses are rendered on the worker (auto: its GPU if it has one, else compiled CPU)" },
-        { key: "landmarks", type: "string", choices: ["full", "heavy"], default: "heavy",
-          description: "The learned model that finds the body's landmarks in each view (full: faster)" },
+        { key: "landmarks", type: "string", choices: ["auto", "full", "heavy"], default: "auto",
+          description: "The learned model that finds the body's landmarks in each view (auto: the preset's; " +
+                       "full: faster)" },
         // How a worker runs the add-on's command line: Blender with the extension installed, or a Python with the
         // package (the manager's variable {mocap_python}, one value per platform).
         { key: "runner", type: "string", choices: ["blender", "python"], default: "blender",
