@@ -249,7 +249,7 @@ grep '^STAGE-UI' "$out/ui.log" | sed 's/^STAGE-UI/[stage-ui]/'
 # a panel's draw that raises only prints its traceback: the sidebar would show half a panel
 grep -q Traceback "$out/ui.log" && fail "the UI run printed a traceback (a panel's draw?); see $out/ui.log"
 python3 - "$out/ui/ui_report.json" <<'PY' || fail "the UI run did not do what a user does; see $out/ui.log and $out/ui/"
-import json, re, sys
+import json, os, re, sys
 r = json.load(open(sys.argv[1]))
 problems = list(r["errors"])
 check = lambda ok, what: ok or problems.append(what)
@@ -258,6 +258,9 @@ check(r.get("import", {}).get("result") == ["FINISHED"] and len(r["import"]["cam
 check(r.get("check", {}).get("dofs") == 30, "Check rig: 30 DOF")
 check(r.get("preset") == {"name": "preview", "budget": [50, 4], "local_fit_fine": False},
       f"the Preview preset: {r.get('preset')}")
+tracked = os.path.join(os.path.dirname(sys.argv[1]), "ui_result", "report.json")
+model = json.load(open(tracked))["settings"]["landmarks"] if os.path.isfile(tracked) else None
+check(model == "full", f"the Preview preset with the Landmark Model Auto tracked with {model!r}, not full")
 cal = r.get("calibrate", {})
 check(cal.get("track_click") == ["FINISHED"] and cal.get("invoke") == ["RUNNING_MODAL"],
       f"Track did not start the actor's calibration (modal): {cal.get('track_click')} {cal.get('invoke')}")

@@ -2,13 +2,13 @@
 `blender duet/subject.blend --python two_actors.py -- CAPTURE OUT` (with `-b`: the operator's synchronous path).
 
 What a user does in the Subject and Track panels for several actors: tick 'Track Every Armature', set the capture
-and output folders and a short frame range, measure one actor's height on its armature, choose the Full landmark
-model (not the default: the property must reach both actors' fits and tracking), press Track with Fit the Actor's
+and output folders and a short frame range, measure one actor's height on its armature, choose the Heavy landmark
+model (not the Preview preset's: the property must reach both actors' fits and tracking), press Track with Fit the Actor's
 Build on (the default) and 3 calibration frames: each actor's build is fitted in turn (in the UI the modal
 calibration, one actor after the other), then both are tracked (the modal Track), watched from a timer as the
 window keeps drawing. Both actors' fits must be saved in their result folders (actors/<armature>/actor.json, made
 on this capture; the measured actor's with its measured height), both armatures keyed on every tracked frame, each
-actor's result folder written and tracked with the full model, the UI never stalled more than 5 s.
+actor's result folder written and tracked with the heavy model, the UI never stalled more than 5 s.
 """
 import json
 import sys
@@ -26,7 +26,7 @@ m.output_dir = out
 m.use_frame_range, m.frame_start, m.frame_end = True, 0, 2
 m.preset = "preview"
 m.fit_actor_build, m.calibrate_frames = True, 3
-m.landmarks = "full"
+m.landmarks = "heavy"
 MEASURED = {armatures[-1]: 1.62}  # one actor's measured height, on its own armature (Subject panel, under its name)
 for name, height in MEASURED.items():
     bpy.context.scene.objects[name].mocap_measured.actor_height = height
@@ -61,7 +61,7 @@ def check_and_end(result):
     started = ["FINISHED"]
     ok = (report["result"] == started and len(armatures) == 2 and m.status.startswith("Tracked 3 frames")
           and (bpy.app.background or state["calibrating_seen"])
-          and all(k["keyed"] and k["folder"] and k["fitted"] and k["landmarks"] == "full"
+          and all(k["keyed"] and k["folder"] and k["fitted"] and k["landmarks"] == "heavy"
                   for k in report["keys"].values())
           and (Path(out) / "tracked.blend").is_file()
           and all(abs((report.get("measured_height_m", {}).get(n) or 0) - h) < 1e-3 for n, h in MEASURED.items())
