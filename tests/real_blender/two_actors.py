@@ -3,8 +3,8 @@
 
 What a user does in the Subject and Track panels for several actors: tick 'Track Every Armature', set the capture
 and output folders and a short frame range, measure one actor's height on its armature, choose the Heavy landmark
-model (not the Preview preset's: the property must reach both actors' fits and tracking), press Track with Fit the Actor's
-Build on (the default) and 3 calibration frames: each actor's build is fitted in turn (in the UI the modal
+model (not the Preview preset's: the property must reach both actors' fits and tracking), press Track with Fit the
+Actor's Build on (the default) and 3 calibration frames: each actor's build is fitted in turn (in the UI the modal
 calibration, one actor after the other), then both are tracked (the modal Track), watched from a timer as the
 window keeps drawing. Both actors' fits must be saved in their result folders (actors/<armature>/actor.json, made
 on this capture; the measured actor's with its measured height), both armatures keyed on every tracked frame, each
