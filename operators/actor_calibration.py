@@ -106,13 +106,24 @@ def _chosen_body(fit, session, targets, rig_poses, log):
     log("calibration: the spine/thigh split, the hip width, the height and the choice between the rig and the "
         "calibrated body, against the person masks")
     comparison = compare_bodies(fit, session.character, session.tracker, targets, rig_poses)
-    log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)})")
+    log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)}){_ruled_out(comparison)}")
     return keep_chosen(fit, session.character, comparison)
 
 
 _CHOICE = {"rig": "kept the rig's proportions",
            "halfway": "took each segment halfway between the fit and the rig scaled to the fitted height",
            "uniform": "took the rig scaled uniformly to the height the person masks read"}
+
+
+def _ruled_out(check):
+    """Why the rig was not kept although the masks liked it best (core/actor/body_choice.rig_ruled_out), or ''."""
+    ruled_out = check.get("ruled_out") if isinstance(check, dict) else check.ruled_out
+    if not ruled_out:
+        return ""
+    from ..core.actor.body_choice import RIG_HEIGHT_GATE
+
+    return (f"; not the rig: the landmarks and the person masks both read the height more than "
+            f"{100 * RIG_HEIGHT_GATE:.0f} % off the rig's")
 
 
 def _mismatches(mismatch):
@@ -206,8 +217,10 @@ def describe(fit):
         check = refined.get("body_check")
         if check:
             fitted = check.get("fitted_lengths_m", L)["height"]
-            lines.append(f"{_CHOICE[check['chosen']]}: it matches the person masks best "
-                         f"({_mismatches(check['mismatch'])}; the landmark fit's height {fitted:.3f} m)")
+            why = "the rig matched the person masks best but is ruled out" if check.get("ruled_out") else \
+                "it matches the person masks best"
+            lines.append(f"{_CHOICE[check['chosen']]}: {why} ({_mismatches(check['mismatch'])}; the landmark fit's "
+                         f"height {fitted:.3f} m){_ruled_out(check)}")
             if check["chosen"] == "halfway":
                 lines += _searched_by_masks(check)
             lines += _height_by_masks(check)

@@ -292,6 +292,47 @@ def test_the_body_choice_scores_each_body_once(walk, monkeypatch):
         assert comparison.mismatch[name] == pytest.approx(cost(proportions))
 
 
+def test_the_rig_is_not_kept_where_the_landmarks_and_the_masks_both_read_another_height(walk, monkeypatch):
+    """core/actor/body_choice.rig_ruled_out: the rig the masks like best is still set aside where the landmarks' and
+    the masks' heights both lie more than RIG_HEIGHT_GATE off the rig's on the same side; the rig scaled to the
+    masks' height is taken instead. One reading off, or the two on opposite sides, keep the rig."""
+    from types import SimpleNamespace
+
+    from markerless_mocap.core.actor import body_choice, height_by_masks
+    from markerless_mocap.core.actor.landmark_fit import ProportionsFit
+
+    gate = body_choice.RIG_HEIGHT_GATE
+    assert body_choice.rig_ruled_out(1.70, {"landmark_height_m": 1.64, "masks_height_m": 1.66})
+    assert not body_choice.rig_ruled_out(1.70, {"landmark_height_m": 1.64, "masks_height_m": 1.70 * (1 - gate / 2)})
+    assert not body_choice.rig_ruled_out(1.70, {"landmark_height_m": 1.64, "masks_height_m": 1.76})
+
+    body, poses = walk
+    rig_height = segment_lengths(body)["height"]
+    fitted = Proportions({"spine": 0.97, "thigh": 0.95, "forearm": 1.0, "hip_width": 0.98}, 0.96)
+    lengths = segment_lengths(scaled_body(body, fitted))
+    fit = ProportionsFit(fitted, lengths, segment_lengths(body), [0, 1, 2], 0.03, 0.02, poses[:3], {})
+
+    def mismatch(subject, proxy, cameras, masks, candidates, *args):  # masks that like the rig's height best
+        return [abs(np.log(p.overall)) + 0.01 * sum(abs(np.log(f)) for f in p.factors.values()) for p, _ in candidates]
+
+    def compare(masks_height):
+        monkeypatch.setattr(height_by_masks, "height_by_masks", lambda subject, start, mismatch: {
+            "log_change": 0.0, "grid": [], "landmark_height_m": 0.96 * rig_height, "masks_height_m": masks_height,
+            "taken": False})
+        monkeypatch.setattr(body_choice, "mask_mismatch", mismatch)
+        targets = SimpleNamespace(cameras=[], masks=[], keypoints=[], resolution=lambda tracker: 1.0)
+        tracker = SimpleNamespace(proxy=None, settings=SimpleNamespace(backend="fast", landmarks="full"))
+        return body_choice.compare_bodies(fit, body, tracker, targets, poses[:3])
+
+    kept = compare(0.99 * rig_height)
+    assert kept.chosen == "rig" and "uniform" not in kept.mismatch and not kept.ruled_out
+    ruled = compare(0.975 * rig_height)
+    assert ruled.mismatch["rig"] < ruled.mismatch["uniform"] and ruled.chosen == "uniform"
+    assert ruled.as_dict()["ruled_out"] == ["rig"]
+    chosen = body_choice.keep_chosen(fit, body, ruled)
+    assert chosen.lengths["height"] == pytest.approx(0.975 * rig_height, rel=1e-6)
+
+
 def test_the_masks_find_the_trunk_leg_split(walk):
     """core/actor/trunk_leg_split.py: a trade keeps spine + thigh (the standing height) and changes the spine by exp(t);
     on synthetic masks of an actor whose spine is 6 % shorter and thighs longer by the same length, the search

@@ -22,7 +22,8 @@ there (docs/defaults.md, "compare_bodies").
 In cluttered rooms with changing light the landmarks read the height 3-8 % short (actor9, actor12, lobby) and the
 searches at that scale go wrong with it. The masks read the height better (core/actor/height_by_masks.py); where the two
 disagree by more than the studio errors, the rig scaled uniformly to the masks' height stands in for the halfway
-body.
+body. Where instead the two agree that the rig is the wrong height, the rig is not kept even when the masks like it
+best: the masks' mismatch hardly changes with a few per cent of height in a cluttered room with three cameras.
 """
 from __future__ import annotations
 
@@ -33,6 +34,11 @@ import numpy as np
 from .proportions import Proportions, scaled_body, segment_lengths
 
 BODIES = ("rig", "halfway", "uniform")  # in this order, the first of equal mismatches wins
+# Where the landmarks and the masks both read the actor's height more than this off the rig's, on the same side, the
+# rig as it is is not the actor: each reads the height to about 1.5 % of the truth. The masks alone could not see a
+# rig 3 % too tall (spin_dev: rig 0.1802, the rig at the masks' height 0.1801) and it tracked 4 mm worse
+# (docs/defaults.md, "RIG_HEIGHT_GATE").
+RIG_HEIGHT_GATE = 0.02
 
 
 @dataclasses.dataclass
@@ -44,15 +50,25 @@ class BodyComparison:
     split: dict = dataclasses.field(default_factory=dict)
     hip_width: dict = dataclasses.field(default_factory=dict)
     height: dict = dataclasses.field(default_factory=dict)
+    ruled_out: tuple = ()  # bodies the height readings rule out whatever their mismatch (rig_ruled_out)
 
     @property
     def chosen(self):
-        return min(self.mismatch, key=lambda name: (self.mismatch[name], BODIES.index(name)))
+        left = [name for name in self.mismatch if name not in self.ruled_out]
+        return min(left, key=lambda name: (self.mismatch[name], BODIES.index(name)))
 
     def as_dict(self):
         searches = {name: search for name, search in (("split", self.split), ("hip_width", self.hip_width),
                                                       ("height", self.height)) if search}
-        return {"mismatch": dict(self.mismatch), "chosen": self.chosen, **searches}
+        ruled_out = {"ruled_out": list(self.ruled_out)} if self.ruled_out else {}
+        return {"mismatch": dict(self.mismatch), "chosen": self.chosen, **ruled_out, **searches}
+
+
+def rig_ruled_out(rig_height, height):
+    """Whether the landmarks' and the masks' heights (`height`: height_by_masks' record) both lie more than
+    RIG_HEIGHT_GATE from `rig_height` (m), on the same side."""
+    off = np.array([height["landmark_height_m"], height["masks_height_m"]]) / rig_height - 1.0
+    return bool(np.all(np.abs(off) > RIG_HEIGHT_GATE) and off[0] * off[1] > 0)
 
 
 def fitted_scale(fit):
@@ -118,9 +134,14 @@ def compare_bodies(fit, subject, tracker, targets, rig_poses):
         bodies["uniform"] = uniform_body(fit, height["masks_height_m"])
     else:
         bodies["halfway"] = body
-    costs = mismatch(bodies.values())
-    return BodyComparison(dict(zip(bodies, costs)), bodies, {"spine_log_change": t, "grid": grid},
-                          {"log_change": w, "grid": widths}, height)
+    comparison = BodyComparison(dict(zip(bodies, mismatch(bodies.values()))), bodies,
+                                {"spine_log_change": t, "grid": grid}, {"log_change": w, "grid": widths}, height)
+    if comparison.chosen == "rig" and rig_ruled_out(fit.subject_lengths["height"], height):
+        if "uniform" not in bodies:  # the rig at the masks' height: what the masks could not tell from the rig
+            bodies["uniform"] = uniform_body(fit, height["masks_height_m"])
+            comparison.mismatch["uniform"] = mismatch([bodies["uniform"]])[0]
+        comparison.ruled_out = ("rig",)
+    return comparison
 
 
 def mask_mismatch(subject, proxy, cameras, masks, candidates, keypoints=None, resolution=1.0, backend="auto",
