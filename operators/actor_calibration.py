@@ -106,7 +106,8 @@ def _chosen_body(fit, session, targets, rig_poses, log):
     log("calibration: the spine/thigh split, the hip width, the height and the choice between the rig and the "
         "calibrated body, against the person masks")
     comparison = compare_bodies(fit, session.character, session.tracker, targets, rig_poses)
-    log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)}){_ruled_out(comparison)}")
+    log(f"calibration: {_CHOICE[comparison.chosen]} ({_mismatches(comparison.mismatch)})"
+        f"{_ruled_out(comparison.ruled_out)}")
     return keep_chosen(fit, session.character, comparison)
 
 
@@ -115,9 +116,9 @@ _CHOICE = {"rig": "kept the rig's proportions",
            "uniform": "took the rig scaled uniformly to the height the person masks read"}
 
 
-def _ruled_out(check):
-    """Why the rig was not kept although the masks liked it best (core/actor/body_choice.rig_ruled_out), or ''."""
-    ruled_out = check.get("ruled_out") if isinstance(check, dict) else check.ruled_out
+def _ruled_out(ruled_out):
+    """Why the rig was not kept although the masks liked it best (`ruled_out`: the bodies set aside,
+    core/actor/body_choice.rig_ruled_out), or ''."""
     if not ruled_out:
         return ""
     from ..core.actor.body_choice import RIG_HEIGHT_GATE
@@ -220,7 +221,7 @@ def describe(fit):
             why = "the rig matched the person masks best but is ruled out" if check.get("ruled_out") else \
                 "it matches the person masks best"
             lines.append(f"{_CHOICE[check['chosen']]}: {why} ({_mismatches(check['mismatch'])}; the landmark fit's "
-                         f"height {fitted:.3f} m){_ruled_out(check)}")
+                         f"height {fitted:.3f} m){_ruled_out(check.get('ruled_out'))}")
             if check["chosen"] == "halfway":
                 lines += _searched_by_masks(check)
             lines += _height_by_masks(check)
