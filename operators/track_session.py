@@ -16,6 +16,7 @@ from ..core.evidence.learned import model_path, require_model
 from ..core.energy.likelihood import resolve_weights
 from ..core.results.result_folder import ResultWriter, atomic_path
 from ..core.tracking.foot_contact import CONTACT_SPEED, FootContactError, check_speed
+from ..core.tracking.fast_arms import FAST_ARM_FROM, FAST_ARM_TO
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ, MIN_RUN, check_cutoff, smooth_poses
 from ..core.tracking.settings import TrackingSettings
 from ..core.tracking.tracker import Tracker
@@ -237,7 +238,8 @@ class TrackSession:
         if self.smooth_hz and len(est) >= MIN_RUN:
             poses = smooth_poses(self.body, poses, frames, self.capture.frames.fps, self.smooth_hz)
             smoothing = {"cutoff_hz": self.smooth_hz,
-                         "filter": "Butterworth low-pass, 2nd order, forwards and backwards"}
+                         "filter": "Butterworth low-pass, 2nd order, forwards and backwards",
+                         "fast_arms_m_s": [FAST_ARM_FROM, FAST_ARM_TO]}
         pinned, locking = self._lock_feet(poses, frames)
         if smoothing is None and locking is None:
             if self.writer.holds_finished_take:  # a finished run smoothed or pinned: the solved take again

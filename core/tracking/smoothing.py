@@ -9,7 +9,8 @@ It works on the DOF vectors, so every bone keeps its length; the joint angles st
 root orientation is filtered as a unit quaternion with a consistent sign (a rotation vector jumps where the
 turn passes 180 degrees). Runs of consecutive frames are filtered apart: a gap in the frame numbers is not
 motion. It is offline (it needs the frames after each frame), so it runs once the take is solved; the raw
-poses are kept beside the smoothed ones.
+poses are kept beside the smoothed ones. An arm whose hand moves faster than the filter can follow keeps its
+solved angles for those frames (core/tracking/fast_arms.py).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import numpy as np
 
 from ..body.rotations import quaternions_to_rotvecs, rotvecs_to_quaternions
 from ..errors import InputError
+from .fast_arms import keep_fast_arms
 
 DEFAULT_CUTOFF_HZ = 8.0
 ORDER = 2  # per pass; forwards and backwards make it 4th order with zero phase
@@ -63,9 +65,10 @@ def low_pass(signal, cutoff_fraction):
     return filtfilt(b, a, signal, axis=0, padtype="odd", padlen=pad)
 
 
-def smooth_poses(body, poses, frames, fps, cutoff_hz=DEFAULT_CUTOFF_HZ):
+def smooth_poses(body, poses, frames, fps, cutoff_hz=DEFAULT_CUTOFF_HZ, fast_arms=True):
     """Solved poses (F,D) of `frames` (F,) -> the smoothed poses (F,D), each run of consecutive frames low-passed
-    at `cutoff_hz`; runs shorter than MIN_RUN frames unchanged. The joint angles are clipped to their limits."""
+    at `cutoff_hz`; runs shorter than MIN_RUN frames unchanged. The joint angles are clipped to their limits.
+    With `fast_arms`, an arm keeps its solved angles where its wrist moves fast (core/tracking/fast_arms.py)."""
     poses = np.asarray(poses, dtype=np.float64)
     fraction = check_cutoff(cutoff_hz, fps)
     out = poses.copy()
@@ -80,4 +83,6 @@ def smooth_poses(body, poses, frames, fps, cutoff_hz=DEFAULT_CUTOFF_HZ):
             q = low_pass(rotvecs_to_quaternions(run[:, rot]), fraction)
             out[a:b, rot] = quaternions_to_rotvecs(q, run[:, rot])
     out[:, rest] = np.clip(out[:, rest], body.lower[rest], body.upper[rest])
+    if fast_arms:
+        out = keep_fast_arms(body, poses, out, frames, fps)[0]
     return out
