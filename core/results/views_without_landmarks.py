@@ -9,7 +9,7 @@ take rests on fewer views.
 import json
 from pathlib import Path
 
-from ..tracking.smoothing import consecutive_runs
+from ..tracking.frame_runs import consecutive_runs
 
 # A camera is named only when its landmarks were left out on at least this many frames [DESIGN]: the agreement
 # rule drops a whole view on a few frames of most takes with nobody else there (dusk and lobby: 1-4 of 60-100),

@@ -19,6 +19,7 @@ import numpy as np
 from ..body.rotations import quaternions_to_rotvecs, rotvecs_to_quaternions
 from ..errors import InputError
 from .fast_arms import keep_fast_arms
+from .frame_runs import consecutive_runs
 
 DEFAULT_CUTOFF_HZ = 8.0
 ORDER = 2  # per pass; forwards and backwards make it 4th order with zero phase
@@ -43,16 +44,6 @@ def check_cutoff(cutoff_hz, fps):
         raise SmoothingError(f"smoothing cut-off {cutoff_hz:g} Hz is not below half the frame rate "
                              f"({nyquist:g} Hz at {fps:g} fps); choose less than {nyquist:g} Hz, or 0 to turn it off")
     return cutoff_hz / nyquist
-
-
-def consecutive_runs(frames):
-    """Index ranges [(start, stop), ...] of runs of consecutive frame numbers."""
-    frames = np.asarray(frames, dtype=np.int64)
-    if frames.size == 0:
-        return []
-    breaks = np.nonzero(np.diff(frames) != 1)[0] + 1
-    edges = np.concatenate([[0], breaks, [frames.size]])
-    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
 def low_pass(signal, cutoff_fraction):
