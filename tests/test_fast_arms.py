@@ -10,7 +10,7 @@ from markerless_mocap.core.tracking.smoothing import smooth_poses
 FPS = 30.0
 
 
-def _path(step_speeds, frames=None):
+def _path(step_speeds):
     """Wrist positions about the shoulder (F, 3) stepping along x at the given signed speeds (m/s)."""
     path = np.zeros((len(step_speeds) + 1, 3))
     path[1:, 0] = np.cumsum(step_speeds) / FPS
@@ -37,7 +37,7 @@ def test_an_arm_jumping_back_and_forth_is_not_fast_and_a_gap_is_no_step():
 @pytest.fixture(scope="module")
 def fling():
     """(body, true poses, solved poses: the truth with jitter) of 60 frames on the walk's rig: the right arm
-    raised by 150 degrees within three frames at frame 30 (the wrist at about 10 m/s), the left arm still."""
+    raised by 150 degrees within three frames at frame 30 (the wrist at about 11 m/s), the left arm still."""
     bpy = pytest.importorskip("bpy")
     from scene_helpers import load_scene_body
 

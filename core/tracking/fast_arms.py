@@ -45,8 +45,7 @@ def fast_weights(wrist_about_shoulder, frames, fps):
     of a run of consecutive frames, the one step there is); a gap in the frame numbers is not a step."""
     frames = np.asarray(frames)
     path = np.asarray(wrist_about_shoulder, dtype=np.float64)
-    n = len(frames)
-    speed = np.zeros(n)
+    speed = np.zeros(len(frames))
     for start, stop in consecutive_runs(frames):
         if stop - start < 2:
             continue
@@ -59,16 +58,13 @@ def fast_weights(wrist_about_shoulder, frames, fps):
 
 
 def keep_fast_arms(body, solved, smoothed, frames, fps):
-    """(poses, {side: frames where the arm kept some of its solved angles}): `smoothed` (F, D) with each arm's
-    angles faded towards `solved` where its wrist moves fast."""
-    sides = arms(body)
+    """`smoothed` (F, D) with each arm's angles faded towards `solved` where its wrist moves fast."""
     out = np.array(smoothed, dtype=np.float64)
+    sides = arms(body)
     if not sides:
-        return out, {}
+        return out
     joints = body.joint_positions(out)
-    kept = {}
-    for side, shoulder, wrist, dofs in sides:
+    for _side, shoulder, wrist, dofs in sides:
         w = fast_weights(joints[:, wrist] - joints[:, shoulder], frames, fps)[:, None]
         out[:, dofs] = (1.0 - w) * out[:, dofs] + w * np.asarray(solved)[:, dofs]
-        kept[side] = int(np.count_nonzero(w))
-    return out, kept
+    return out

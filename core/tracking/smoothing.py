@@ -75,5 +75,5 @@ def smooth_poses(body, poses, frames, fps, cutoff_hz=DEFAULT_CUTOFF_HZ, fast_arm
             out[a:b, rot] = quaternions_to_rotvecs(q, run[:, rot])
     out[:, rest] = np.clip(out[:, rest], body.lower[rest], body.upper[rest])
     if fast_arms:
-        out = keep_fast_arms(body, poses, out, frames, fps)[0]
+        out = keep_fast_arms(body, poses, out, frames, fps)
     return out
