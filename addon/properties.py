@@ -9,6 +9,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
                        StringProperty)
 
 from ..core.batch.plan import DEFAULT_CHUNK_FRAMES
+from ..core.tracking.fast_arms import FAST_ARM_FROM
 from ..core.tracking.foot_contact import CONTACT_SPEED
 from ..core.tracking.options import OPTIONS, settings_from_choices
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
@@ -165,8 +166,10 @@ class MocapSettings(bpy.types.PropertyGroup):
                          description=OPTIONS["refine"].choices[0].description)
     smoothing_hz: FloatProperty(name="Smoothing", default=DEFAULT_CUTOFF_HZ, min=0.0, soft_max=12.0, precision=1,
                                 description="When the take is solved, low-pass its motion at this many Hz (less "
-                                            "jitter; 0: keep every frame as solved). The solved poses stay in "
-                                            "joints_raw.npz / poses_raw.npz in the output folder")
+                                            "jitter; 0: keep every frame as solved). An arm whose wrist moves "
+                                            f"faster than {FAST_ARM_FROM:g} m/s keeps its solved angles, so a flung "
+                                            "hand is not cut short. The solved poses stay in joints_raw.npz / "
+                                            "poses_raw.npz in the output folder")
     foot_lock: BoolProperty(name="Foot Locking", default=True,
                             description="When the take is solved, pin its planted feet to the floor by refitting the "
                                         "legs (no foot sliding or sinking). The take before that stays in "

@@ -27,9 +27,8 @@ from ..core.batch.progress import (CANCEL_FILE, cancel_requested, frames_solved,
                                    request_cancel, write_progress)
 from ..core.results.result_folder import ACTORS_FOLDER, actor_result_folder
 from ..core.tracking.options import CHOICE_NAMES
-from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
-from .cmd_track import add_foot_lock_options, add_tracking_options, foot_lock_args
+from .cmd_track import add_foot_lock_options, add_smooth_option, add_tracking_options, foot_lock_args
 from .failures import EXIT_INPUT as EXIT_USER_ERROR
 
 EXIT_SOME_FAILED = 1
@@ -61,8 +60,7 @@ def add_arguments(p):
     p.add_argument("--retries", type=int, default=2, help="runs of a failed chunk after the first (default 2)")
     p.add_argument("--threads-per-chunk", type=int,
                    help="thread pools of each local chunk process (default: cores / workers)")
-    p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
-                   help=f"low-pass each stitched take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: as solved)")
+    add_smooth_option(p, "each stitched take")
     p.add_argument("--no-calibrate", action="store_true",
                    help="track the takes that do not say `calibrate = true` with the rig's proportions (by default a "
                         "take of at least 20 frames without an `actor` is tracked with the actor's, fitted first)")

@@ -9,9 +9,8 @@ overlap how far the two chunks disagreed. A take of several actors is stitched a
 import sys
 from pathlib import Path
 
-from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .cmd_plan_chunks import add_chunk_arguments
-from .cmd_track import add_foot_lock_options, finish_and_list, open_subject, parse_frames
+from .cmd_track import add_foot_lock_options, add_smooth_option, finish_and_list, open_subject, parse_frames
 from .cmd_track_chunk import add_take_arguments, sessions_of, take_inputs, take_session
 
 
@@ -19,8 +18,7 @@ def add_arguments(p):
     add_take_arguments(p, "the take's frames F0-F1, inclusive (as planned)")
     add_chunk_arguments(p)
     p.add_argument("--out", type=Path, required=True, help="the take's result folder")
-    p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
-                   help=f"low-pass the stitched take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: as solved)")
+    add_smooth_option(p, "the stitched take")
     p.add_argument("--no-export", action="store_true", help="skip animation.bvh/.fbx and tracked.blend")
     p.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
     add_foot_lock_options(p)

@@ -9,6 +9,7 @@ from ..core.actor.frames import DEFAULT_FRAMES
 from ..core.results.views_without_landmarks import views_without_landmarks_message
 from ..core.tracking.foot_contact import CONTACT_SPEED
 from ..core.tracking.options import OPTIONS, settings_from_choices
+from ..core.tracking.fast_arms import FAST_ARM_FROM, FAST_ARM_TO
 from ..core.tracking.smoothing import DEFAULT_CUTOFF_HZ
 from .failures import EXIT_PARENT_GONE
 
@@ -83,9 +84,7 @@ def add_arguments(p):
                    help="--calibrate with a length measured on the actor in place of the footage's (height, "
                         "forearm, ...; repeat for several); with several armatures name whose, as in "
                         "Partner:height=1.62")
-    p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
-                   help=f"low-pass the finished take at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: keep the poses as "
-                        "solved); the solved poses stay in joints_raw.npz / poses_raw.npz")
+    add_smooth_option(p, "the finished take")
     add_foot_lock_options(p)
     add_tracking_options(p)
 
@@ -93,6 +92,14 @@ def add_arguments(p):
 def foot_lock_args(on, speed):
     """The command line's words for foot locking (add_foot_lock_options), for a command started elsewhere."""
     return ["--foot-lock" if on else "--no-foot-lock", "--foot-lock-speed", f"{speed:g}"]
+
+
+def add_smooth_option(p, what):
+    p.add_argument("--smooth", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
+                   help=f"low-pass {what} at HZ (default {DEFAULT_CUTOFF_HZ:g}; 0: keep the poses as solved); an "
+                        f"arm whose wrist moves faster than {FAST_ARM_FROM:g} m/s keeps its solved angles, fully from "
+                        f"{FAST_ARM_TO:g} m/s, so a flung hand is not cut short; the solved poses stay in "
+                        "joints_raw.npz / poses_raw.npz")
 
 
 def add_foot_lock_options(p):
